@@ -1,0 +1,66 @@
+//! The vocabulary shared by every importer: what a vertex holds and how a reader hands
+//! the mesh over.
+
+use crate::MeshError;
+
+/// Which optional per-vertex attributes a mesh carries.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Attributes {
+    pub normals: bool,
+    pub colors: bool,
+    pub uvs: bool,
+}
+
+/// One vertex with every attribute Tessera keeps. Absent attributes are zero
+/// (and `color` is opaque white `[255; 4]` when the file has no colour).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Vertex {
+    /// Model-space position.
+    pub position: [f32; 3],
+    /// Vertex normal as given by the file (not necessarily unit length).
+    pub normal: [f32; 3],
+    /// RGBA, 8 bits per channel (RGB files get alpha 255; float colours are scaled).
+    pub color: [u8; 4],
+    /// Texture coordinates (u, v) as in the file.
+    pub uv: [f32; 2],
+}
+
+impl Default for Vertex {
+    fn default() -> Self {
+        Vertex { position: [0.0; 3], normal: [0.0; 3], color: [255; 4], uv: [0.0; 2] }
+    }
+}
+
+/// What a reader knows before the first vertex.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct MeshHeader {
+    pub attributes: Attributes,
+    /// Vertex count when the header says it (PLY), `None` otherwise.
+    pub vertex_count: Option<u64>,
+    /// Face (polygon) count when the header says it (PLY, binary STL), `None` otherwise.
+    pub face_count: Option<u64>,
+}
+
+/// Receives a mesh as it is read. Returning an error stops the reader, which returns it.
+pub trait MeshVisitor {
+    fn header(&mut self, header: &MeshHeader) -> Result<(), MeshError>;
+    fn vertex(&mut self, vertex: &Vertex) -> Result<(), MeshError>;
+    /// A triangle of vertex indices (global, 0-based, all already delivered).
+    fn triangle(&mut self, indices: [u32; 3]) -> Result<(), MeshError>;
+}
+
+/// Counts of what a reader delivered and what it skipped (each skip is also logged
+/// once with `tracing::warn!`).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct ImportReport {
+    pub vertices: u64,
+    pub triangles: u64,
+    /// Polygons with more than 3 corners that were fan-triangulated.
+    pub polygons_triangulated: u64,
+    /// Faces dropped because two or more corners share one vertex index.
+    pub degenerate_faces_skipped: u64,
+    /// Faces with fewer than 3 corners, dropped.
+    pub short_faces_skipped: u64,
+    /// Unknown OBJ statements or PLY elements that were ignored.
+    pub ignored_statements: u64,
+}
