@@ -1,1 +1,185 @@
-//! placeholder
+//! The Adaptive TetraPuzzles builder: any triangle mesh in, a `.tsr` multiresolution
+//! model out, out of core and in parallel.
+//!
+//! Stages, each in its own module:
+//! 1. [`import`]: stream the input into a flat vertex store and face list (bounded RAM);
+//!    compute vertex normals when the input has none.
+//! 2. [`partition`]: locate triangles in the binary forest of tetrahedra, choose the
+//!    conforming adaptive set of splits (leaves of at most `leaf_triangles`), route
+//!    triangles into per-leaf buckets on disk.
+//! 3. [`hierarchy`]: bottom up, level by level, every diamond in parallel
+//!    ([`diamond`]): merge children, lock the outer border, simplify, record morph
+//!    destinations, split into the parent tetrahedra; saturate errors and spheres.
+//! 4. Write the model atomically through `tessera_format`.
+//!
+//! Peak memory is bounded by the chunk sizes derived from [`BuildOptions::memory_bytes`]
+//! and by the working set of the diamonds in flight, not by the input size.
+
+pub mod bounds;
+pub mod diamond;
+mod hierarchy;
+pub mod import;
+pub mod partition;
+pub mod patch;
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+use tessera_format::FormatError;
+use tessera_mesh::{ImportReport, MeshError};
+
+/// Everything the builder can be asked to do differently. `Default` is what
+/// `tessera build` uses.
+#[derive(Clone, Debug)]
+pub struct BuildOptions {
+    /// Memory budget in bytes for the build's own buffers (default 1 GiB).
+    pub memory_bytes: u64,
+    /// Worker threads; `None` = all cores.
+    pub threads: Option<usize>,
+    /// Quantisation: `2^quant_bits` grid cells along the bounding cube's edge (default
+    /// 16; at most 21). The largest position error is `sqrt(3)/2` cells.
+    pub quant_bits: u32,
+    /// Most triangles in a leaf (ATP: 4000).
+    pub leaf_triangles: u32,
+    /// Target triangles per internal node (ATP: 2000).
+    pub node_triangles: u32,
+    /// Where temporary files go (default: beside the output).
+    pub tmp_dir: Option<PathBuf>,
+}
+
+impl Default for BuildOptions {
+    fn default() -> Self {
+        BuildOptions {
+            memory_bytes: 1 << 30,
+            threads: None,
+            quant_bits: 16,
+            leaf_triangles: 4000,
+            node_triangles: 2000,
+            tmp_dir: None,
+        }
+    }
+}
+
+/// Long work reports through this; the CLI maps it to progress bars, tests ignore it.
+pub trait Progress: Sync {
+    /// A new stage begins with `total` units of work (0 when unknown).
+    fn stage(&self, name: &str, total: u64);
+    /// `n` more units done.
+    fn advance(&self, n: u64);
+    /// The current stage is done.
+    fn finish_stage(&self);
+}
+
+/// A [`Progress`] that reports nothing.
+pub struct NoProgress;
+
+impl Progress for NoProgress {
+    fn stage(&self, _: &str, _: u64) {}
+    fn advance(&self, _: u64) {}
+    fn finish_stage(&self) {}
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum BuildError {
+    #[error("{0}")]
+    Input(MeshError),
+    #[error("{}: {source}", path.display())]
+    Io { path: PathBuf, source: std::io::Error },
+    #[error("{}: the mesh has no triangles", .0.display())]
+    EmptyInput(PathBuf),
+    #[error(transparent)]
+    Format(#[from] FormatError),
+    #[error("invalid option: {0}")]
+    Options(String),
+    #[error("internal error: {0}")]
+    Internal(String),
+}
+
+impl BuildError {
+    pub(crate) fn io(path: &Path, source: std::io::Error) -> BuildError {
+        BuildError::Io { path: path.to_path_buf(), source }
+    }
+}
+
+/// What a build did, for `--json` and the benchmark.
+#[derive(Clone, Debug, Default)]
+pub struct BuildReport {
+    pub input_vertices: u64,
+    pub input_triangles: u64,
+    pub import: ImportReport,
+    pub normals_computed: bool,
+    pub nodes: u64,
+    pub leaves: u64,
+    pub levels: u32,
+    pub output_bytes: u64,
+    pub stored_triangles: u64,
+    pub degenerate_triangles_removed: u64,
+    pub duplicate_triangles_removed: u64,
+    pub oversized_leaves: u64,
+    /// Model units per grid step.
+    pub quant_step: f64,
+    /// Largest distance between an input vertex and its stored position.
+    pub quant_error_max: f64,
+    pub max_error: f64,
+    /// (stage, seconds).
+    pub stage_seconds: Vec<(String, f64)>,
+    pub seconds: f64,
+}
+
+impl BuildReport {
+    pub fn bytes_per_input_triangle(&self) -> f64 {
+        self.output_bytes as f64 / self.input_triangles.max(1) as f64
+    }
+    pub fn triangles_per_second(&self) -> f64 {
+        self.input_triangles as f64 / self.seconds.max(1e-9)
+    }
+}
+
+/// Build `output` from the mesh at `input`. Writes atomically: on any error nothing is
+/// left at `output` (a file already there stays as it was).
+pub fn build(input: &Path, output: &Path, opts: &BuildOptions, progress: &dyn Progress) -> Result<BuildReport, BuildError> {
+    if !(1..=21).contains(&opts.quant_bits) {
+        return Err(BuildError::Options(format!("quantization bits must be 1..=21, got {}", opts.quant_bits)));
+    }
+    if opts.leaf_triangles < 16 || opts.node_triangles < 8 || opts.node_triangles > opts.leaf_triangles {
+        return Err(BuildError::Options("need leaf_triangles >= 16 and 8 <= node_triangles <= leaf_triangles".into()));
+    }
+    let pool = {
+        let mut b = rayon::ThreadPoolBuilder::new();
+        if let Some(n) = opts.threads {
+            b = b.num_threads(n.max(1));
+        }
+        b.build().map_err(|e| BuildError::Internal(e.to_string()))?
+    };
+    pool.install(|| build_in_pool(input, output, opts, progress))
+}
+
+fn build_in_pool(input: &Path, output: &Path, opts: &BuildOptions, progress: &dyn Progress) -> Result<BuildReport, BuildError> {
+    let started = Instant::now();
+    let tmp_parent = match &opts.tmp_dir {
+        Some(d) => d.clone(),
+        None => output.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new(".")).to_path_buf(),
+    };
+    let tmp = tempfile::Builder::new()
+        .prefix(".tessera-build-")
+        .tempdir_in(&tmp_parent)
+        .map_err(|e| BuildError::io(&tmp_parent, e))?;
+    let mut report = BuildReport::default();
+    let mut t = Instant::now();
+    let mut lap = |name: &str, report: &mut BuildReport| {
+        report.stage_seconds.push((name.to_string(), t.elapsed().as_secs_f64()));
+        t = Instant::now();
+    };
+    let imported = import::import(input, tmp.path(), progress)?;
+    report.input_vertices = imported.vertex_count;
+    report.input_triangles = imported.face_count;
+    report.import = imported.report.clone();
+    report.normals_computed = imported.normals_computed;
+    lap("import", &mut report);
+    let part = partition::partition(&imported, tmp.path(), opts, progress)?;
+    report.oversized_leaves = part.oversized_leaves;
+    lap("partition", &mut report);
+    hierarchy::build_hierarchy(&imported, &part, tmp.path(), output, opts, progress, &mut report)?;
+    lap("hierarchy+write", &mut report);
+    report.seconds = started.elapsed().as_secs_f64();
+    Ok(report)
+}

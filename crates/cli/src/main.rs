@@ -1,1 +1,95 @@
-fn main() {}
+//! `tessera`: build, inspect, verify and cut multiresolution models; generate test meshes.
+//!
+//! A thin layer over the library crates: parse arguments, call one library function,
+//! print the result. Errors are printed once, on one line, with a non-zero exit.
+
+mod cmd_build;
+mod cmd_extract;
+mod cmd_gen;
+mod cmd_info;
+mod cmd_verify;
+mod progress;
+
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+
+#[derive(Parser)]
+#[command(name = "tessera", version, about = "Multiresolution rendering of huge triangle meshes")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Build a multiresolution model (.tsr) from a PLY, OBJ or STL mesh.
+    Build(cmd_build::Args),
+    /// Print a model's header, counts, errors and sizes.
+    Info(cmd_info::Args),
+    /// Check everything checkable in a model; exit 0 only if it is valid.
+    Verify(cmd_verify::Args),
+    /// Select a cut of the hierarchy and write it as one mesh (PLY).
+    Extract(cmd_extract::Args),
+    /// Generate deterministic test meshes (binary PLY).
+    Gen(cmd_gen::Args),
+}
+
+fn main() -> ExitCode {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_env("TESSERA_LOG").unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
+        )
+        .with_writer(std::io::stderr)
+        .with_target(false)
+        .init();
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Build(a) => cmd_build::run(a),
+        Command::Info(a) => cmd_info::run(a),
+        Command::Verify(a) => cmd_verify::run(a),
+        Command::Extract(a) => cmd_extract::run(a),
+        Command::Gen(a) => cmd_gen::run(a),
+    };
+    match result {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// Parse a byte size like `1G`, `512M`, `64k`, `1000000`.
+pub fn parse_bytes(s: &str) -> Result<u64, String> {
+    let s = s.trim();
+    let (num, mult) = match s.char_indices().last() {
+        Some((i, c)) if c.is_ascii_alphabetic() => {
+            let m = match c.to_ascii_uppercase() {
+                'K' => 1u64 << 10,
+                'M' => 1 << 20,
+                'G' => 1 << 30,
+                'T' => 1 << 40,
+                _ => return Err(format!("unknown size suffix in {s:?} (use K, M, G or T)")),
+            };
+            (&s[..i], m)
+        }
+        _ => (s, 1),
+    };
+    let n: f64 = num.trim().parse().map_err(|_| format!("not a size: {s:?}"))?;
+    if !(n.is_finite() && n > 0.0) {
+        return Err(format!("size must be positive: {s:?}"));
+    }
+    Ok((n * mult as f64) as u64)
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn sizes_parse() {
+        assert_eq!(super::parse_bytes("1G"), Ok(1 << 30));
+        assert_eq!(super::parse_bytes("512m"), Ok(512 << 20));
+        assert_eq!(super::parse_bytes("1000"), Ok(1000));
+        assert!(super::parse_bytes("1X").is_err());
+        assert!(super::parse_bytes("-1G").is_err());
+    }
+}

@@ -9,9 +9,22 @@
 //! each, ordered by level then Morton code of the tetrahedron centre) | patch data (one
 //! encoded patch per node, in node-table order, each with its own CRC-32).
 
+mod codec;
+mod error;
+mod reader;
 mod records;
+mod verify;
+mod writer;
 
+pub use codec::{
+    decode_patch, encode_patch, oct_decode, oct_encode, PatchData, MAX_PATCH_TRIANGLES,
+    MAX_PATCH_VERTICES, PATCH_CODEC_VERSION, PATCH_FLAG_MORPH, PATCH_FLAG_ZSTD, PATCH_HEADER_BYTES,
+};
+pub use error::FormatError;
+pub use reader::Model;
 pub use records::{
     Header, NodeRecord, ATTR_COLORS, ATTR_NORMALS, ATTR_UVS, FORMAT_VERSION, MAGIC, NODE_FLAG_LEAF,
     NO_NODE,
 };
+pub use verify::{verify_structure, VerifyReport, MAX_PROBLEM_MESSAGES};
+pub use writer::{header_crc32, write_model, PatchSpool, SpooledPatch};

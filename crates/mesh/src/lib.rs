@@ -6,10 +6,12 @@
 //! [`MeshError`] naming the file and the problem; problems that can be skipped safely
 //! (degenerate faces, for instance) are counted in the [`ImportReport`] instead.
 
+mod common;
 mod error;
 mod obj;
 mod ply_read;
 mod ply_write;
+mod source;
 mod stl;
 mod types;
 

@@ -1,1 +1,30 @@
-//! placeholder
+//! Cut selection for Tessera: which patches of a model to draw for a camera.
+//!
+//! Pure CPU, no GPU, no threads, no I/O besides reading a camera file. Depends only on
+//! the node records of `tessera-format` ([`tessera_format::Header`],
+//! [`tessera_format::NodeRecord`]), so it runs on a memory-mapped node table, on a table
+//! fetched over HTTP, or on hand-built arrays in tests.
+//!
+//! - [`camera`]: the shared camera and its JSON format (`docs/camera.md`), view matrix
+//!   and frustum in a model's local frame.
+//! - [`select`]: the stateless top-down traversal of ATP section 4 ([`select_cut`]) with
+//!   frustum, backface and screen-space-error decisions; uniform level cuts.
+//! - [`merge`]: welding the decoded patches of a cut into one mesh ([`merge_patches`]).
+//! - [`edges`]: edge-use counts of a mesh ([`edge_report`]), the crack detector.
+
+pub mod camera;
+pub mod edges;
+mod hash;
+pub mod merge;
+pub mod select;
+
+pub use camera::{Camera, CameraError, CameraErrorKind, Frustum, Orbit, ViewBasis, CAMERA_FIELDS};
+pub use edges::{edge_report, EdgeReport};
+pub use merge::{merge_patches, CutMesh, PatchRef};
+pub use select::{
+    closest_distance, is_backfacing, is_leaf, needs_refinement, select_cut, select_cut_into,
+    traverse_into, uniform_level_cut, Criterion, Cut, Decision, ViewParams,
+};
+
+#[cfg(test)]
+mod proptests;

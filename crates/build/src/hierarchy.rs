@@ -1,0 +1,414 @@
+//! Stage 3: the bottom-up construction, level by level from the deepest, every diamond of
+//! a level in parallel (they touch disjoint tetrahedra), then the node table in (level,
+//! Morton) order and the atomic write.
+//!
+//! Patches move between levels through a temporary spool on disk, so memory holds only
+//! the diamonds in flight. A child's final, encoded patch is written when its parent's
+//! diamond is processed, because only then are its morph destinations known.
+
+use crate::bounds::Sphere;
+use crate::diamond::{self, SimplifyConfig};
+use crate::import::Imported;
+use crate::partition::{parent_id, read_leaf_faces, tet_id, Leaf, Partition, TetId};
+use crate::patch::{remove_bad_triangles, WorkPatch, WorkVertex, Welder};
+use crate::{BuildError, BuildOptions, BuildReport, Progress};
+use rayon::prelude::*;
+use std::collections::{HashMap, HashSet};
+use std::fs::File;
+use std::path::Path;
+use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
+use std::sync::Mutex;
+use tessera_format::{
+    encode_patch, write_model, Header, NodeRecord, PatchData, PatchSpool, SpooledPatch, ATTR_COLORS, ATTR_NORMALS,
+    ATTR_UVS, NODE_FLAG_LEAF, NO_NODE,
+};
+use tessera_tetra::{DiamondKey, Tet};
+
+/// Everything known about a node before the table is written.
+#[derive(Clone, Debug)]
+struct NodeInfo {
+    id: TetId,
+    leaf: bool,
+    /// Stored (f32-rounded, padded) spheres, so saturation holds on what is written.
+    tight: Sphere,
+    sat: Sphere,
+    error: f64,
+    cone: [f32; 4],
+    vertex_count: u32,
+    triangle_count: u32,
+    diamond: u32,
+    quant_min: [u32; 3],
+    /// The builder's patch (until the parent encodes it).
+    work: Option<SpooledPatch>,
+    /// The final encoded patch.
+    out: Option<SpooledPatch>,
+}
+
+struct Ctx<'a> {
+    imp: &'a Imported,
+    part: &'a Partition,
+    buckets: File,
+    leaf_of: HashMap<TetId, &'a Leaf>,
+    internal: HashSet<TetId>,
+    work: PatchSpool,
+    out: PatchSpool,
+    nodes: Mutex<HashMap<TetId, NodeInfo>>,
+    diamond_ids: AtomicU32,
+    degenerate: AtomicU64,
+    duplicate: AtomicU64,
+    attributes: u32,
+    cfg: SimplifyConfig,
+    step: f64,
+}
+
+fn stored(s: &Sphere, scale: f64) -> Sphere {
+    Sphere::from_f32(s.to_f32(scale))
+}
+
+impl Ctx<'_> {
+    fn internal_err(&self, what: &str) -> BuildError {
+        BuildError::Internal(what.to_string())
+    }
+
+    fn quantized(&self, v: u32) -> WorkVertex {
+        let s = self.imp.vertices.get(v);
+        WorkVertex { q: self.part.grid.quantize(s.position), normal: s.normal, color: s.color, uv: s.uv }
+    }
+
+    /// A leaf's patch from its bucket: weld, clean, optimise.
+    fn load_leaf(&self, leaf: &Leaf) -> Result<WorkPatch, BuildError> {
+        let faces = read_leaf_faces(&self.buckets, &self.part.buckets, leaf)?;
+        let mut local: HashMap<u32, u32> = HashMap::with_capacity(faces.len());
+        let mut w = Welder::with_capacity(faces.len());
+        let mut indices = Vec::with_capacity(faces.len() * 3);
+        for f in &faces {
+            for &g in f {
+                let id = match local.get(&g) {
+                    Some(&id) => id,
+                    None => {
+                        let id = w.add(&self.quantized(g));
+                        local.insert(g, id);
+                        id
+                    }
+                };
+                indices.push(id);
+            }
+        }
+        let c = remove_bad_triangles(&mut indices);
+        self.degenerate.fetch_add(c.degenerate, Ordering::Relaxed);
+        self.duplicate.fetch_add(c.duplicate, Ordering::Relaxed);
+        let mut p = WorkPatch { vertices: w.vertices, indices };
+        p.optimize();
+        Ok(p)
+    }
+
+    fn leaf_info(&self, id: TetId, p: &WorkPatch) -> NodeInfo {
+        let tight = stored(&p.tight_sphere(self.step), self.part.grid.size);
+        NodeInfo {
+            id,
+            leaf: true,
+            tight,
+            sat: tight,
+            error: 0.0,
+            cone: p.normal_cone(),
+            vertex_count: p.vertices.len() as u32,
+            triangle_count: p.triangle_count() as u32,
+            diamond: self.diamond_ids.fetch_add(1, Ordering::Relaxed),
+            quant_min: quant_min(&p.vertices),
+            work: None,
+            out: None,
+        }
+    }
+
+    /// Encode a node's final patch (with its morph targets) into the output spool.
+    fn emit(&self, id: TetId, p: &WorkPatch, morph: Vec<[u32; 3]>) -> Result<(), BuildError> {
+        let data = PatchData {
+            positions: p.vertices.iter().map(|v| v.q).collect(),
+            normals: p.vertices.iter().map(|v| v.normal).collect(),
+            colors: if self.attributes & ATTR_COLORS != 0 { p.vertices.iter().map(|v| v.color).collect() } else { vec![] },
+            uvs: if self.attributes & ATTR_UVS != 0 { p.vertices.iter().map(|v| v.uv).collect() } else { vec![] },
+            morph_targets: morph,
+            indices: p.indices.clone(),
+        };
+        let qmin = quant_min(&p.vertices);
+        let sp = self.out.append(&encode_patch(&data, self.attributes, qmin))?;
+        let mut nodes = self.nodes.lock().map_err(|_| self.internal_err("poisoned node map"))?;
+        let n = nodes.get_mut(&id).ok_or_else(|| self.internal_err("emit of unknown node"))?;
+        n.out = Some(sp);
+        n.quant_min = qmin;
+        n.work = None;
+        Ok(())
+    }
+
+    /// Load a child's patch: leaves from their bucket (registering the node), internal
+    /// nodes from the work spool.
+    fn load_child(&self, id: TetId) -> Result<Option<WorkPatch>, BuildError> {
+        if let Some(leaf) = self.leaf_of.get(&id) {
+            let p = self.load_leaf(leaf)?;
+            let info = self.leaf_info(id, &p);
+            self.nodes.lock().map_err(|_| self.internal_err("poisoned node map"))?.insert(id, info);
+            return Ok(Some(p));
+        }
+        if !self.internal.contains(&id) {
+            return Ok(None);
+        }
+        let sp = {
+            let nodes = self.nodes.lock().map_err(|_| self.internal_err("poisoned node map"))?;
+            nodes.get(&id).and_then(|n| n.work).ok_or_else(|| self.internal_err("child patch missing"))?
+        };
+        let bytes = self.work.read(&sp)?;
+        WorkPatch::from_bytes(&bytes).map(Some).ok_or_else(|| self.internal_err("corrupt temporary patch"))
+    }
+
+    /// One diamond (ATP 5.2).
+    fn process_diamond(&self, tets: &[Tet]) -> Result<(), BuildError> {
+        // 1. The children of every tetrahedron of the diamond.
+        let mut kids: Vec<(TetId, WorkPatch)> = Vec::new();
+        let mut per_tet_tris = vec![0usize; tets.len()];
+        for (ti, t) in tets.iter().enumerate() {
+            for c in t.children() {
+                if let Some(p) = self.load_child(tet_id(&c))? {
+                    per_tet_tris[ti] += p.triangle_count();
+                    kids.push((tet_id(&c), p));
+                }
+            }
+        }
+        // 2. Merge, lock the outer border, simplify.
+        let refs: Vec<&WorkPatch> = kids.iter().map(|k| &k.1).collect();
+        let merged = diamond::merge(&refs);
+        let locks = diamond::border_locks(&merged.vertices, &merged.indices);
+        let target: usize = per_tet_tris.iter().map(|&n| n.min(self.cfg.node_triangles)).sum();
+        let (simplified, err_grid) = diamond::simplify(&merged, &locks, target, &self.cfg);
+        // 3. Morph destinations; the children are now complete and can be written.
+        let dest = diamond::morph_destinations(&merged, &simplified);
+        let mut child_err = 0.0f64;
+        let mut balls = Vec::new();
+        for (k, (id, p)) in kids.iter().enumerate() {
+            let morph = merged.child_maps[k].iter().map(|&mi| merged.vertices[dest[mi as usize] as usize].q).collect();
+            self.emit(*id, p, morph)?;
+            let nodes = self.nodes.lock().map_err(|_| self.internal_err("poisoned node map"))?;
+            let n = nodes.get(id).ok_or_else(|| self.internal_err("child info missing"))?;
+            child_err = child_err.max(n.error);
+            balls.push(n.sat);
+        }
+        // 4. Split into the parent tetrahedra.
+        let level = tets[0].level;
+        let grid = self.part.grid;
+        let centroids: Vec<[i64; 3]> = tets.iter().map(|t| t.centroid4()).collect();
+        let owner = |q: [[u32; 3]; 3]| -> usize {
+            let c = grid.centroid3(q);
+            if let Some(t) = Tet::locate_scaled(c, 3, level) {
+                if let Some(i) = tets.iter().position(|m| m.root == t.root && m.path == t.path) {
+                    return i;
+                }
+            }
+            // Outside the diamond (the simplified surface moved a little): nearest
+            // tetrahedron centre. Any choice is crack-free, since the tetrahedra of a
+            // diamond are always drawn together.
+            let d = |i: usize| (0..3).map(|a| ((c[a] * 4 - centroids[i][a] * 3) as f64).powi(2)).sum::<f64>();
+            (0..tets.len()).min_by(|&a, &b| d(a).total_cmp(&d(b))).unwrap_or(0)
+        };
+        let mut parts = diamond::split(&merged, &simplified, tets.len(), owner);
+        // 5. Bounds and saturation.
+        let error = err_grid as f64 * self.step + child_err;
+        let mut tights = Vec::with_capacity(parts.len());
+        for p in parts.iter_mut() {
+            p.optimize();
+            let s = (!p.indices.is_empty()).then(|| stored(&p.tight_sphere(self.step), grid.size));
+            if let Some(s) = s {
+                balls.push(s);
+            }
+            tights.push(s);
+        }
+        let sat = stored(&Sphere::of_balls(&balls), grid.size);
+        let diamond_id = self.diamond_ids.fetch_add(1, Ordering::Relaxed);
+        for (t, (p, tight)) in tets.iter().zip(parts.iter().zip(tights)) {
+            let work = self.work.append(&p.to_bytes())?;
+            let info = NodeInfo {
+                id: tet_id(t),
+                leaf: false,
+                tight: tight.unwrap_or(Sphere { center: sat.center, radius: 0.0 }),
+                sat,
+                error: (error as f32) as f64,
+                cone: p.normal_cone(),
+                vertex_count: p.vertices.len() as u32,
+                triangle_count: p.triangle_count() as u32,
+                diamond: diamond_id,
+                quant_min: quant_min(&p.vertices),
+                work: Some(work),
+                out: None,
+            };
+            self.nodes.lock().map_err(|_| self.internal_err("poisoned node map"))?.insert(tet_id(t), info);
+        }
+        Ok(())
+    }
+}
+
+fn quant_min(v: &[WorkVertex]) -> [u32; 3] {
+    if v.is_empty() {
+        return [0; 3];
+    }
+    std::array::from_fn(|a| v.iter().map(|x| x.q[a]).min().unwrap_or(0))
+}
+
+pub(crate) fn build_hierarchy(
+    imp: &Imported,
+    part: &Partition,
+    tmp: &Path,
+    output: &Path,
+    opts: &BuildOptions,
+    progress: &dyn Progress,
+    report: &mut BuildReport,
+) -> Result<(), BuildError> {
+    // Internal nodes: split tetrahedra with at least one triangle below them.
+    let mut internal: HashSet<TetId> = HashSet::new();
+    for l in &part.leaves {
+        let mut id = parent_id(l.id);
+        while let Some(p) = id {
+            if !internal.insert(p) {
+                break;
+            }
+            id = parent_id(p);
+        }
+    }
+    let mut by_level: Vec<HashMap<DiamondKey, Vec<Tet>>> = Vec::new();
+    for &(r, l, p) in &internal {
+        let t = Tet::from_path(r, l, p).ok_or_else(|| BuildError::Internal("bad tetrahedron".into()))?;
+        if by_level.len() <= l as usize {
+            by_level.resize_with(l as usize + 1, HashMap::new);
+        }
+        by_level[l as usize].entry(t.diamond()).or_default().push(t);
+    }
+    let attributes = ATTR_NORMALS
+        | if imp.attributes.colors { ATTR_COLORS } else { 0 }
+        | if imp.attributes.uvs { ATTR_UVS } else { 0 };
+    let ctx = Ctx {
+        imp,
+        part,
+        buckets: File::open(&part.buckets).map_err(|e| BuildError::io(&part.buckets, e))?,
+        leaf_of: part.leaves.iter().map(|l| (l.id, l)).collect(),
+        internal,
+        work: PatchSpool::new(tmp)?,
+        out: PatchSpool::new(tmp)?,
+        nodes: Mutex::new(HashMap::new()),
+        diamond_ids: AtomicU32::new(0),
+        degenerate: AtomicU64::new(0),
+        duplicate: AtomicU64::new(0),
+        attributes,
+        cfg: SimplifyConfig {
+            node_triangles: opts.node_triangles as usize,
+            normal_weight: 0.5,
+            color_weight: 0.5,
+            has_colors: imp.attributes.colors,
+        },
+        step: part.grid.step(),
+    };
+    let total_diamonds: usize = by_level.iter().map(|m| m.len()).sum();
+    progress.stage("simplify diamonds", total_diamonds as u64);
+    for level in (0..by_level.len()).rev() {
+        let mut diamonds: Vec<Vec<Tet>> = std::mem::take(&mut by_level[level]).into_values().collect();
+        for d in diamonds.iter_mut() {
+            d.sort_by_key(|t| (t.root, t.path));
+        }
+        // Deterministic order of work (results do not depend on it, ids do).
+        diamonds.sort_by_key(|d| (d[0].root, d[0].path));
+        diamonds.par_iter().try_for_each(|d| {
+            let r = ctx.process_diamond(d);
+            progress.advance(1);
+            r
+        })?;
+        imp.vertices.release();
+    }
+    progress.finish_stage();
+    // Roots: encode (no morph targets); unsplit roots are leaves.
+    for r in 0..6u8 {
+        let id = (r, 0u8, 0u64);
+        if let Some(leaf) = ctx.leaf_of.get(&id) {
+            let p = ctx.load_leaf(leaf)?;
+            let info = ctx.leaf_info(id, &p);
+            ctx.nodes.lock().map_err(|_| ctx.internal_err("poisoned"))?.insert(id, info);
+            ctx.emit(id, &p, Vec::new())?;
+        } else if ctx.internal.contains(&id) {
+            let p = ctx.load_child(id)?.ok_or_else(|| ctx.internal_err("root patch missing"))?;
+            ctx.emit(id, &p, Vec::new())?;
+        }
+    }
+    report.degenerate_triangles_removed = ctx.degenerate.load(Ordering::Relaxed);
+    report.duplicate_triangles_removed = ctx.duplicate.load(Ordering::Relaxed);
+    finalize(&ctx, output, opts, progress, report)
+}
+
+fn finalize(ctx: &Ctx, output: &Path, opts: &BuildOptions, progress: &dyn Progress, report: &mut BuildReport) -> Result<(), BuildError> {
+    progress.stage("write", 0);
+    let nodes = std::mem::take(&mut *ctx.nodes.lock().map_err(|_| ctx.internal_err("poisoned"))?);
+    let mut infos: Vec<(u64, NodeInfo)> = nodes
+        .into_values()
+        .map(|n| {
+            let m = Tet::from_path(n.id.0, n.id.1, n.id.2).map(|t| t.morton()).unwrap_or(0);
+            (m, n)
+        })
+        .collect();
+    infos.sort_by_key(|(m, n)| (n.id.1, *m, n.id.0, n.id.2));
+    let index: HashMap<TetId, u32> = infos.iter().enumerate().map(|(i, (_, n))| (n.id, i as u32)).collect();
+    let grid = ctx.part.grid;
+    let mut records = Vec::with_capacity(infos.len());
+    let mut patches = Vec::with_capacity(infos.len());
+    let mut max_error = 0.0f32;
+    let mut levels = 0u32;
+    let mut root_balls = Vec::new();
+    for (_, n) in &infos {
+        let (r, l, p) = n.id;
+        let child = |c: u64| index.get(&(r, l + 1, p | (c << l))).copied().unwrap_or(NO_NODE);
+        let rec = NodeRecord {
+            tet_path: p,
+            vertex_count: n.vertex_count,
+            triangle_count: n.triangle_count,
+            children: [child(0), child(1)],
+            parent: parent_id(n.id).and_then(|pid| index.get(&pid).copied()).unwrap_or(NO_NODE),
+            diamond: n.diamond,
+            level: l,
+            root: r,
+            flags: if n.leaf { NODE_FLAG_LEAF } else { 0 },
+            error: n.error as f32,
+            tight_sphere: n.tight.to_f32(grid.size),
+            saturated_sphere: n.sat.to_f32(grid.size),
+            normal_cone: n.cone,
+            quant_min: n.quant_min,
+            ..Default::default()
+        };
+        max_error = max_error.max(rec.error);
+        levels = levels.max(l as u32 + 1);
+        if l == 0 {
+            root_balls.push(n.sat);
+        }
+        report.stored_triangles += n.triangle_count as u64;
+        report.leaves += n.leaf as u64;
+        records.push(rec);
+        patches.push(n.out.ok_or_else(|| ctx.internal_err("node without an encoded patch"))?);
+    }
+    let bs = Sphere::of_balls(&root_balls);
+    let header = Header {
+        attributes: ctx.attributes,
+        quant_bits: grid.bits,
+        input_vertices: ctx.imp.vertex_count,
+        input_triangles: ctx.imp.face_count,
+        cube_origin: grid.origin,
+        cube_size: grid.size,
+        bounding_sphere: [bs.center[0] + grid.origin[0], bs.center[1] + grid.origin[1], bs.center[2] + grid.origin[2], bs.radius],
+        root_count: root_balls.len() as u32,
+        level_count: levels,
+        max_error,
+        leaf_triangles_max: opts.leaf_triangles,
+        node_triangles_target: opts.node_triangles,
+        ..bytemuck::Zeroable::zeroed()
+    };
+    write_model(output, &header, &records, &patches, &ctx.out)?;
+    progress.finish_stage();
+    report.nodes = records.len() as u64;
+    report.levels = levels;
+    report.max_error = max_error as f64;
+    report.quant_step = grid.step();
+    report.quant_error_max = grid.step() * 3f64.sqrt() / 2.0;
+    report.output_bytes = std::fs::metadata(output).map_err(|e| BuildError::io(output, e))?.len();
+    Ok(())
+}

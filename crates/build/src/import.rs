@@ -1,0 +1,257 @@
+//! Stage 1: stream the input mesh into two flat temporary files, a vertex store (one
+//! fixed-size record per vertex, memory-mapped later for random access) and a face list
+//! (three `u32` per triangle), while measuring the bounding box. Nothing proportional to
+//! the mesh stays in memory. Inputs without normals get area-weighted vertex normals
+//! here, globally, so a vertex shared by two patches has one normal in both.
+
+use crate::{BuildError, Progress};
+use bytemuck::{Pod, Zeroable};
+use memmap2::{Mmap, MmapMut};
+use std::fs::File;
+use std::io::{BufReader, BufWriter, Read, Write};
+use std::path::Path;
+use tessera_mesh::{Attributes, ImportReport, MeshError, MeshHeader, MeshVisitor, Vertex};
+
+/// A vertex as stored in the temporary vertex store. 36 bytes.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct StoredVertex {
+    pub position: [f32; 3],
+    pub normal: [f32; 3],
+    pub color: [u8; 4],
+    pub uv: [f32; 2],
+}
+
+/// Axis-aligned bounding box of the input positions.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Aabb {
+    pub min: [f64; 3],
+    pub max: [f64; 3],
+}
+
+/// What stage 1 leaves behind.
+pub struct Imported {
+    pub vertices: VertexStore,
+    pub faces_path: std::path::PathBuf,
+    pub face_count: u64,
+    pub vertex_count: u64,
+    pub attributes: Attributes,
+    /// Whether normals were computed here (the input had none).
+    pub normals_computed: bool,
+    pub bounds: Aabb,
+    pub report: ImportReport,
+}
+
+/// Read-only random access to the vertex store through a memory map. The map's resident
+/// pages count towards the process's RSS, so long passes call [`VertexStore::release`]
+/// now and then: the pages stay in the page cache, only our mapping forgets them.
+pub struct VertexStore {
+    map: Option<Mmap>,
+}
+
+impl VertexStore {
+    pub fn open(path: &Path) -> Result<VertexStore, BuildError> {
+        let file = File::open(path).map_err(|e| BuildError::io(path, e))?;
+        let len = file.metadata().map_err(|e| BuildError::io(path, e))?.len();
+        if len == 0 {
+            return Ok(VertexStore { map: None });
+        }
+        // SAFETY: the file is our own temporary file; nothing else writes it while mapped.
+        let map = unsafe { Mmap::map(&file) }.map_err(|e| BuildError::io(path, e))?;
+        Ok(VertexStore { map: Some(map) })
+    }
+
+    /// The vertex with global index `i` (the caller has validated indices at import).
+    pub fn get(&self, i: u32) -> StoredVertex {
+        let b = self.map.as_deref().unwrap_or(&[]);
+        let o = i as usize * 36;
+        bytemuck::pod_read_unaligned(&b[o..o + 36])
+    }
+
+    /// Drop this process's resident pages of the map (they remain in the page cache).
+    pub fn release(&self) {
+        if let Some(m) = &self.map {
+            // SAFETY: DONTNEED on a read-only shared file mapping only discards page
+            // table entries; later reads fault the same file contents back in.
+            let _ = unsafe { m.unchecked_advise(memmap2::UncheckedAdvice::DontNeed) };
+        }
+    }
+}
+
+struct Sink<'a> {
+    vertices: BufWriter<File>,
+    faces: BufWriter<File>,
+    attributes: Attributes,
+    vertex_count: u64,
+    face_count: u64,
+    bounds: Aabb,
+    progress: &'a dyn Progress,
+    paths: (&'a Path, &'a Path),
+}
+
+impl MeshVisitor for Sink<'_> {
+    fn header(&mut self, header: &MeshHeader) -> Result<(), MeshError> {
+        self.attributes = header.attributes;
+        if let Some(n) = header.face_count {
+            self.progress.stage("import", n);
+        }
+        Ok(())
+    }
+
+    fn vertex(&mut self, v: &Vertex) -> Result<(), MeshError> {
+        if v.position.iter().any(|c| !c.is_finite()) {
+            return Err(MeshError::Visitor(format!(
+                "vertex {} has a non-finite coordinate",
+                self.vertex_count
+            )));
+        }
+        if self.vertex_count >= u32::MAX as u64 {
+            return Err(MeshError::Visitor("more than 4294967295 vertices".into()));
+        }
+        for i in 0..3 {
+            let c = v.position[i] as f64;
+            self.bounds.min[i] = self.bounds.min[i].min(c);
+            self.bounds.max[i] = self.bounds.max[i].max(c);
+        }
+        let s = StoredVertex { position: v.position, normal: v.normal, color: v.color, uv: v.uv };
+        self.vertices
+            .write_all(bytemuck::bytes_of(&s))
+            .map_err(|e| MeshError::Visitor(format!("{}: {e}", self.paths.0.display())))?;
+        self.vertex_count += 1;
+        Ok(())
+    }
+
+    fn triangle(&mut self, idx: [u32; 3]) -> Result<(), MeshError> {
+        self.faces
+            .write_all(bytemuck::bytes_of(&idx))
+            .map_err(|e| MeshError::Visitor(format!("{}: {e}", self.paths.1.display())))?;
+        self.face_count += 1;
+        if self.face_count % (1 << 20) == 0 {
+            self.progress.advance(1 << 20);
+        }
+        Ok(())
+    }
+}
+
+/// Stage 1. Temporary files go in `tmp`.
+pub fn import(input: &Path, tmp: &Path, progress: &dyn Progress) -> Result<Imported, BuildError> {
+    let vpath = tmp.join("vertices.bin");
+    let fpath = tmp.join("faces.bin");
+    let create = |p: &Path| File::create(p).map_err(|e| BuildError::io(p, e));
+    let mut sink = Sink {
+        vertices: BufWriter::with_capacity(1 << 20, create(&vpath)?),
+        faces: BufWriter::with_capacity(1 << 20, create(&fpath)?),
+        attributes: Attributes::default(),
+        vertex_count: 0,
+        face_count: 0,
+        bounds: Aabb { min: [f64::INFINITY; 3], max: [f64::NEG_INFINITY; 3] },
+        progress,
+        paths: (&vpath, &fpath),
+    };
+    progress.stage("import", 0);
+    let report = tessera_mesh::read_mesh(input, &mut sink).map_err(BuildError::Input)?;
+    progress.finish_stage();
+    let Sink { vertices, faces, attributes, vertex_count, face_count, bounds, .. } = sink;
+    for (w, p) in [(vertices, &vpath), (faces, &fpath)] {
+        w.into_inner().map_err(|e| BuildError::io(p, e.into_error()))?;
+    }
+    if face_count == 0 {
+        return Err(BuildError::EmptyInput(input.to_path_buf()));
+    }
+    let normals_computed = !attributes.normals;
+    if normals_computed {
+        compute_normals(&vpath, &fpath, face_count, progress)?;
+    } else {
+        normalise_given_normals(&vpath)?;
+    }
+    let attributes = Attributes { normals: true, ..attributes };
+    Ok(Imported {
+        vertices: VertexStore::open(&vpath)?,
+        faces_path: fpath,
+        face_count,
+        vertex_count,
+        attributes,
+        normals_computed,
+        bounds,
+        report,
+    })
+}
+
+fn map_mut(path: &Path) -> Result<Option<MmapMut>, BuildError> {
+    let file = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .open(path)
+        .map_err(|e| BuildError::io(path, e))?;
+    if file.metadata().map_err(|e| BuildError::io(path, e))?.len() == 0 {
+        return Ok(None);
+    }
+    // SAFETY: our own temporary file, mapped once, by this thread only.
+    Ok(Some(unsafe { MmapMut::map_mut(&file) }.map_err(|e| BuildError::io(path, e))?))
+}
+
+/// Drop the resident pages of a shared, writable file mapping; dirty pages stay in the
+/// page cache and are written back by the kernel, so nothing is lost.
+fn release_mut(map: &MmapMut) {
+    // SAFETY: see above; for MAP_SHARED file mappings DONTNEED keeps the data.
+    let _ = unsafe { map.unchecked_advise(memmap2::UncheckedAdvice::DontNeed) };
+}
+
+/// Area-weighted vertex normals, accumulated over the face list in one sequential pass
+/// (sequential so the sums, and so the output, are deterministic).
+fn compute_normals(vpath: &Path, fpath: &Path, faces: u64, progress: &dyn Progress) -> Result<(), BuildError> {
+    let Some(mut map) = map_mut(vpath)? else { return Ok(()) };
+    progress.stage("normals", faces);
+    {
+        let verts: &mut [StoredVertex] = bytemuck::cast_slice_mut(&mut map[..]);
+        for v in verts.iter_mut() {
+            v.normal = [0.0; 3];
+        }
+    }
+    let mut reader = BufReader::with_capacity(1 << 20, File::open(fpath).map_err(|e| BuildError::io(fpath, e))?);
+    let mut buf = vec![0u8; 12 << 16];
+    let mut done = 0u64;
+    while done < faces {
+        let n = ((faces - done) as usize).min(1 << 16);
+        reader.read_exact(&mut buf[..n * 12]).map_err(|e| BuildError::io(fpath, e))?;
+        let verts: &mut [StoredVertex] = bytemuck::cast_slice_mut(&mut map[..]);
+        for f in buf[..n * 12].chunks_exact(12) {
+            let t: [u32; 3] = bytemuck::pod_read_unaligned(f);
+            let p = |i: u32| verts[i as usize].position.map(|c| c as f64);
+            let n = crate::patch::face_normal(p(t[0]), p(t[1]), p(t[2]));
+            for &i in &t {
+                let vn = &mut verts[i as usize].normal;
+                for k in 0..3 {
+                    vn[k] += n[k] as f32;
+                }
+            }
+        }
+        done += n as u64;
+        progress.advance(n as u64);
+        if done % (1 << 22) < (1 << 16) {
+            release_mut(&map);
+        }
+    }
+    normalise(bytemuck::cast_slice_mut(&mut map[..]));
+    map.flush().map_err(|e| BuildError::io(vpath, e))?;
+    release_mut(&map);
+    progress.finish_stage();
+    Ok(())
+}
+
+fn normalise_given_normals(vpath: &Path) -> Result<(), BuildError> {
+    let Some(mut map) = map_mut(vpath)? else { return Ok(()) };
+    normalise(bytemuck::cast_slice_mut(&mut map[..]));
+    map.flush().map_err(|e| BuildError::io(vpath, e))?;
+    release_mut(&map);
+    Ok(())
+}
+
+/// Unit length; a zero normal (isolated vertex, degenerate fan) becomes +Z.
+fn normalise(verts: &mut [StoredVertex]) {
+    for v in verts {
+        let n = v.normal;
+        let l = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+        v.normal = if l > 0.0 && l.is_finite() { [n[0] / l, n[1] / l, n[2] / l] } else { [0.0, 0.0, 1.0] };
+    }
+}

@@ -1,0 +1,400 @@
+//! Stage 2: partition the triangles among the leaves of the tetrahedra forest (ATP
+//! section 5.1), with bounded memory.
+//!
+//! ATP inserts triangles one by one and splits a leaf when its bucket overflows. We get
+//! the same adaptive, conforming forest from three sequential passes over flat files,
+//! which needs no per-leaf buffers and parallelises: (1) locate every triangle's centroid
+//! in the forest down to a fixed depth and write its depth-first key; (2) count keys per
+//! node, a few levels of the tree per pass, only below nodes that are still too full;
+//! split every over-full node together with its whole diamond (and, recursively, what
+//! those splits need to exist: the conformity closure); (3) route each triangle to its
+//! leaf's contiguous range of a bucket file, whose offsets the counts give.
+
+use crate::import::Imported;
+use crate::{BuildError, BuildOptions, Progress};
+use rayon::prelude::*;
+use std::collections::{HashMap, HashSet};
+use std::fs::File;
+use std::io::{BufReader, BufWriter, Read, Write};
+use std::os::unix::fs::FileExt;
+use std::path::{Path, PathBuf};
+use tessera_tetra::{dfs_key, dfs_range, Tet, CUBE_BITS, MAX_LEVEL};
+
+/// The global quantisation grid: `2^bits` cells along each edge of the bounding cube.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Grid {
+    pub origin: [f64; 3],
+    pub size: f64,
+    pub bits: u32,
+}
+
+impl Grid {
+    /// The cube around a bounding box: min corner at the box's min, edge = longest side.
+    pub fn new(min: [f64; 3], max: [f64; 3], bits: u32) -> Grid {
+        let ext = (0..3).map(|i| max[i] - min[i]).fold(0.0, f64::max);
+        let size = if ext > 0.0 && ext.is_finite() { ext } else { 1.0 };
+        Grid { origin: min, size, bits }
+    }
+
+    /// Model units per grid step.
+    pub fn step(&self) -> f64 {
+        self.size / (1u64 << self.bits) as f64
+    }
+
+    /// Nearest grid point, clamped into `[0, 2^bits]`.
+    pub fn quantize(&self, p: [f32; 3]) -> [u32; 3] {
+        let n = (1u64 << self.bits) as f64;
+        std::array::from_fn(|i| {
+            let t = (p[i] as f64 - self.origin[i]) / self.size * n;
+            t.round().clamp(0.0, n) as u32
+        })
+    }
+
+    /// 3x the centroid of a triangle in tetra lattice units (use with scale 3).
+    pub fn centroid3(&self, q: [[u32; 3]; 3]) -> [i64; 3] {
+        let shift = CUBE_BITS - self.bits;
+        std::array::from_fn(|i| (q[0][i] as i64 + q[1][i] as i64 + q[2][i] as i64) << shift)
+    }
+}
+
+/// A node of the forest by name: root, level, path (as in `tessera_tetra::Tet`).
+pub type TetId = (u8, u8, u64);
+
+pub fn tet_id(t: &Tet) -> TetId {
+    (t.root, t.level, t.path)
+}
+
+/// The parent's name, computed from the path alone.
+pub fn parent_id(id: TetId) -> Option<TetId> {
+    let (r, l, p) = id;
+    (l > 0).then(|| (r, l - 1, p & ((1u64 << (l - 1)) - 1)))
+}
+
+/// A leaf of the partition and its bucket.
+#[derive(Clone, Debug)]
+pub struct Leaf {
+    pub id: TetId,
+    /// First face of the leaf in the bucket file.
+    pub first_face: u64,
+    pub face_count: u64,
+}
+
+/// The result of stage 2.
+pub struct Partition {
+    pub grid: Grid,
+    /// Every tetrahedron that is split (has children), conforming.
+    pub split: HashSet<TetId>,
+    /// Non-empty leaves, in depth-first order.
+    pub leaves: Vec<Leaf>,
+    /// Faces (3 x u32 global vertex indices) grouped by leaf.
+    pub buckets: PathBuf,
+    /// Leaves that stayed over the triangle limit because the key depth ran out.
+    pub oversized_leaves: u64,
+    /// Depth of the keys (deepest possible leaf).
+    pub key_depth: u8,
+}
+
+/// Faces processed per chunk; bounded memory whatever the input size.
+fn chunk_faces(opts: &BuildOptions) -> usize {
+    ((opts.memory_bytes / 16 / 32) as usize).clamp(1 << 14, 1 << 21)
+}
+
+fn read_chunk<T: bytemuck::Pod>(r: &mut impl Read, n: usize, path: &Path) -> Result<Vec<T>, BuildError> {
+    let mut v = vec![T::zeroed(); n];
+    r.read_exact(bytemuck::cast_slice_mut(&mut v)).map_err(|e| BuildError::io(path, e))?;
+    Ok(v)
+}
+
+pub fn partition(imp: &Imported, tmp: &Path, opts: &BuildOptions, progress: &dyn Progress) -> Result<Partition, BuildError> {
+    let grid = Grid::new(imp.bounds.min, imp.bounds.max, opts.quant_bits);
+    // Deeper keys cost time on every triangle; 3 levels per octree level, and no point
+    // going finer than the quantisation grid.
+    let key_depth = (3 * opts.quant_bits).min(45).min(MAX_LEVEL as u32) as u8;
+    let keys_path = tmp.join("keys.bin");
+    write_keys(imp, &grid, key_depth, &keys_path, opts, progress)?;
+    let split = choose_splits(&keys_path, imp.face_count, key_depth, opts, progress)?;
+    let mut leaves = leaves_of(&split);
+    let buckets = tmp.join("buckets.bin");
+    let oversized = route(imp, &keys_path, &mut leaves, &buckets, opts, progress)?;
+    let _ = std::fs::remove_file(&keys_path);
+    Ok(Partition { grid, split, leaves, buckets, oversized_leaves: oversized, key_depth })
+}
+
+/// Pass 1: one depth-first key per face.
+fn write_keys(imp: &Imported, grid: &Grid, depth: u8, out: &Path, opts: &BuildOptions, progress: &dyn Progress) -> Result<(), BuildError> {
+    progress.stage("locate", imp.face_count);
+    let fp = &imp.faces_path;
+    let mut faces = BufReader::with_capacity(1 << 20, File::open(fp).map_err(|e| BuildError::io(fp, e))?);
+    let mut keys = BufWriter::with_capacity(1 << 20, File::create(out).map_err(|e| BuildError::io(out, e))?);
+    let chunk = chunk_faces(opts);
+    let mut done = 0u64;
+    while done < imp.face_count {
+        let n = ((imp.face_count - done) as usize).min(chunk);
+        let f: Vec<[u32; 3]> = read_chunk(&mut faces, n, fp)?;
+        let k: Vec<u64> = f
+            .par_iter()
+            .map(|t| {
+                let q = t.map(|i| grid.quantize(imp.vertices.get(i).position));
+                let c = grid.centroid3(q);
+                Tet::locate_scaled(c, 3, depth).map(|t| t.dfs_key()).unwrap_or(0)
+            })
+            .collect();
+        keys.write_all(bytemuck::cast_slice(&k)).map_err(|e| BuildError::io(out, e))?;
+        done += n as u64;
+        progress.advance(n as u64);
+        imp.vertices.release();
+    }
+    keys.into_inner().map_err(|e| BuildError::io(out, e.into_error()))?;
+    progress.finish_stage();
+    Ok(())
+}
+
+/// Prefix of a depth-first key at `depth` (root bits included).
+fn prefix(key: u64, depth: u8) -> u64 {
+    key >> (MAX_LEVEL - depth)
+}
+
+fn id_of_prefix(p: u64, depth: u8) -> TetId {
+    let root = (p >> depth) as u8;
+    let mut path = 0u64;
+    for i in 0..depth {
+        path |= ((p >> (depth - 1 - i)) & 1) << i;
+    }
+    (root, depth, path)
+}
+
+/// Pass 2: counts, a band of levels at a time, then the conforming set of splits.
+fn choose_splits(keys: &Path, faces: u64, depth: u8, opts: &BuildOptions, progress: &dyn Progress) -> Result<HashSet<TetId>, BuildError> {
+    // 12 levels per pass keeps the count maps small (a few million entries at most).
+    const BAND: u8 = 12;
+    let cap = opts.leaf_triangles as u64;
+    let chunk = chunk_faces(opts);
+    let mut over_full: Vec<TetId> = Vec::new();
+    // Prefixes (at `from`) whose subtrees must be counted deeper.
+    let mut heavy: HashSet<u64> = HashSet::new();
+    let mut from = 0u8;
+    loop {
+        let to = (from + BAND).min(depth);
+        progress.stage(&format!("count levels {from}..{to}"), faces);
+        let mut counts: HashMap<u64, u64> = HashMap::new();
+        let mut r = BufReader::with_capacity(1 << 20, File::open(keys).map_err(|e| BuildError::io(keys, e))?);
+        let mut done = 0u64;
+        while done < faces {
+            let n = ((faces - done) as usize).min(chunk);
+            let k: Vec<u64> = read_chunk(&mut r, n, keys)?;
+            for key in k {
+                if from == 0 || heavy.contains(&prefix(key, from)) {
+                    *counts.entry(prefix(key, to)).or_default() += 1;
+                }
+            }
+            done += n as u64;
+            progress.advance(n as u64);
+        }
+        progress.finish_stage();
+        // Aggregate upwards within the band; nodes over the cap must split.
+        let mut level_counts = counts;
+        let mut next_heavy = HashSet::new();
+        for d in (from..=to).rev() {
+            if d < depth {
+                for (&p, &c) in &level_counts {
+                    if c > cap {
+                        over_full.push(id_of_prefix(p, d));
+                        if d == to {
+                            next_heavy.insert(p);
+                        }
+                    }
+                }
+            }
+            if d > from {
+                let mut up: HashMap<u64, u64> = HashMap::with_capacity(level_counts.len() / 2 + 1);
+                for (p, c) in level_counts {
+                    *up.entry(p >> 1).or_default() += c;
+                }
+                // One level up in the tree is one bit less, except at the roots where the
+                // prefix is the root index itself: handled by `p >> 1` only when d > 0.
+                level_counts = up;
+            }
+        }
+        if next_heavy.is_empty() || to >= depth {
+            break;
+        }
+        heavy = next_heavy;
+        from = to;
+    }
+    // Conformity closure, coarse to fine.
+    over_full.sort_by_key(|id| (id.1, id.0, id.2));
+    over_full.dedup();
+    let mut split = HashSet::new();
+    for id in over_full {
+        if let Some(t) = Tet::from_path(id.0, id.1, id.2) {
+            ensure_split(&t, &mut split);
+        }
+    }
+    Ok(split)
+}
+
+/// Split `t` with its whole diamond, first splitting whatever must exist for every
+/// tetrahedron of that diamond to exist.
+fn ensure_split(t: &Tet, split: &mut HashSet<TetId>) {
+    if split.contains(&tet_id(t)) {
+        return;
+    }
+    let mates = t.diamond_mates();
+    for m in &mates {
+        if let Some(p) = m.parent() {
+            ensure_split(&p, split);
+        }
+    }
+    for m in &mates {
+        split.insert(tet_id(m));
+    }
+}
+
+/// Children of split tetrahedra that are not split themselves, plus unsplit roots, in
+/// depth-first order (empty ones are dropped after routing).
+fn leaves_of(split: &HashSet<TetId>) -> Vec<Leaf> {
+    let mut ids: Vec<TetId> = (0..6u8).map(|r| (r, 0u8, 0u64)).filter(|id| !split.contains(id)).collect();
+    for &(r, l, p) in split {
+        for c in 0..2u64 {
+            let id = (r, l + 1, p | (c << l));
+            if !split.contains(&id) {
+                ids.push(id);
+            }
+        }
+    }
+    ids.sort_by_key(|&(r, l, p)| dfs_key(r, l, p));
+    ids.into_iter().map(|id| Leaf { id, first_face: 0, face_count: 0 }).collect()
+}
+
+/// Pass 3: count per leaf, then write faces grouped by leaf.
+fn route(imp: &Imported, keys: &Path, leaves: &mut Vec<Leaf>, out: &Path, opts: &BuildOptions, progress: &dyn Progress) -> Result<u64, BuildError> {
+    let starts: Vec<u64> = leaves.iter().map(|l| dfs_key(l.id.0, l.id.1, l.id.2)).collect();
+    let ends: Vec<u64> = leaves.iter().map(|l| dfs_range(l.id.0, l.id.1, l.id.2).1).collect();
+    let find = |key: u64| -> usize {
+        let i = starts.partition_point(|&s| s <= key);
+        debug_assert!(i > 0 && key < ends[i - 1], "leaves tile the key space");
+        i.saturating_sub(1)
+    };
+    let chunk = chunk_faces(opts);
+    let faces = imp.face_count;
+    // Count.
+    progress.stage("route (count)", faces);
+    let mut counts = vec![0u64; leaves.len()];
+    {
+        let mut r = BufReader::with_capacity(1 << 20, File::open(keys).map_err(|e| BuildError::io(keys, e))?);
+        let mut done = 0u64;
+        while done < faces {
+            let n = ((faces - done) as usize).min(chunk);
+            let k: Vec<u64> = read_chunk(&mut r, n, keys)?;
+            for key in k {
+                counts[find(key)] += 1;
+            }
+            done += n as u64;
+            progress.advance(n as u64);
+        }
+    }
+    progress.finish_stage();
+    let mut cursor = vec![0u64; leaves.len()];
+    let mut acc = 0u64;
+    for (i, l) in leaves.iter_mut().enumerate() {
+        l.first_face = acc;
+        l.face_count = counts[i];
+        cursor[i] = acc;
+        acc += counts[i];
+    }
+    // Write: sort each chunk by leaf, one positional write per run.
+    progress.stage("route (write)", faces);
+    let file = File::create(out).map_err(|e| BuildError::io(out, e))?;
+    file.set_len(faces * 12).map_err(|e| BuildError::io(out, e))?;
+    let fp = &imp.faces_path;
+    let mut kr = BufReader::with_capacity(1 << 20, File::open(keys).map_err(|e| BuildError::io(keys, e))?);
+    let mut fr = BufReader::with_capacity(1 << 20, File::open(fp).map_err(|e| BuildError::io(fp, e))?);
+    let mut done = 0u64;
+    while done < faces {
+        let n = ((faces - done) as usize).min(chunk);
+        let k: Vec<u64> = read_chunk(&mut kr, n, keys)?;
+        let f: Vec<[u32; 3]> = read_chunk(&mut fr, n, fp)?;
+        let mut order: Vec<(u32, u32)> = k.iter().enumerate().map(|(i, &key)| (find(key) as u32, i as u32)).collect();
+        order.sort_unstable();
+        let mut i = 0;
+        while i < order.len() {
+            let leaf = order[i].0 as usize;
+            let mut run: Vec<[u32; 3]> = Vec::new();
+            while i < order.len() && order[i].0 as usize == leaf {
+                run.push(f[order[i].1 as usize]);
+                i += 1;
+            }
+            file.write_all_at(bytemuck::cast_slice(&run), cursor[leaf] * 12).map_err(|e| BuildError::io(out, e))?;
+            cursor[leaf] += run.len() as u64;
+        }
+        done += n as u64;
+        progress.advance(n as u64);
+    }
+    progress.finish_stage();
+    let cap = opts.leaf_triangles as u64;
+    let oversized = leaves.iter().filter(|l| l.face_count > cap).count() as u64;
+    leaves.retain(|l| l.face_count > 0);
+    Ok(oversized)
+}
+
+/// Read one leaf's faces from the bucket file.
+pub fn read_leaf_faces(buckets: &File, path: &Path, leaf: &Leaf) -> Result<Vec<[u32; 3]>, BuildError> {
+    let mut v = vec![[0u32; 3]; leaf.face_count as usize];
+    buckets
+        .read_exact_at(bytemuck::cast_slice_mut(&mut v), leaf.first_face * 12)
+        .map_err(|e| BuildError::io(path, e))?;
+    Ok(v)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn prefix_ids_match_tetra_paths() {
+        // Why: the counting pass names nodes by key prefixes, the closure by paths; they
+        // must agree or the wrong tetrahedra get split.
+        let p = [123_456, 654_321, 1_000_001];
+        for depth in [0u8, 1, 5, 17, 33, 45] {
+            let t = Tet::locate_scaled(p, 1, 45).unwrap();
+            let id = id_of_prefix(prefix(t.dfs_key(), depth), depth);
+            let anc = Tet::locate_scaled(p, 1, depth).unwrap();
+            assert_eq!(id, tet_id(&anc), "depth {depth}");
+        }
+    }
+
+    #[test]
+    fn closure_splits_whole_diamonds_and_their_parents() {
+        // Why: a split tetrahedron whose diamond mates do not exist breaks the diamond
+        // rule that crack-free cuts rest on.
+        let t = Tet::locate_scaled([700_001, 300_003, 200_002], 1, 12).unwrap();
+        let mut split = HashSet::new();
+        ensure_split(&t, &mut split);
+        for &(r, l, p) in &split {
+            let s = Tet::from_path(r, l, p).unwrap();
+            for m in s.diamond_mates() {
+                assert!(split.contains(&tet_id(&m)), "mate of split tet not split");
+            }
+            if let Some(pid) = parent_id((r, l, p)) {
+                assert!(split.contains(&pid), "split tet whose parent is not split");
+            }
+        }
+        // Leaves tile the cube: their volumes (as key ranges) cover everything once.
+        let leaves = leaves_of(&split);
+        let mut expect = 0u64;
+        for l in &leaves {
+            let (s, e) = dfs_range(l.id.0, l.id.1, l.id.2);
+            assert_eq!(s, expect);
+            expect = e;
+        }
+        assert_eq!(expect, 6u64 << MAX_LEVEL);
+    }
+
+    #[test]
+    fn quantize_clamps_and_rounds() {
+        let g = Grid::new([0.0; 3], [2.0, 1.0, 1.0], 4);
+        assert_eq!(g.quantize([0.0, 0.0, 0.0]), [0, 0, 0]);
+        assert_eq!(g.quantize([2.0, 1.0, 5.0]), [16, 8, 16]);
+        assert_eq!(g.quantize([0.06, 0.07, -1.0]), [0, 1, 0]);
+    }
+}

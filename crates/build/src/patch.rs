@@ -1,0 +1,201 @@
+//! The builder's in-memory patch: vertices with every attribute at full precision and
+//! positions already on the global grid, plus a triangle list. Patches travel between
+//! levels through a temporary spool as raw bytes.
+
+use crate::bounds::{normal_cone, Sphere};
+use bytemuck::{Pod, Zeroable};
+use std::collections::HashMap;
+
+/// One vertex as the builder sees it. Two vertices are the same vertex exactly when their
+/// bytes are equal, which is how patches are welded across tetrahedra.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct WorkVertex {
+    /// Position on the global quantisation grid.
+    pub q: [u32; 3],
+    /// Unit normal (zero when the model has none).
+    pub normal: [f32; 3],
+    /// RGBA8 (opaque white when the model has no colours).
+    pub color: [u8; 4],
+    /// Texture coordinates (zero when absent).
+    pub uv: [f32; 2],
+}
+
+/// The byte identity of a vertex, used as a hash key for welding.
+pub type VertexKey = [u32; 9];
+
+impl WorkVertex {
+    pub fn key(&self) -> VertexKey {
+        bytemuck::cast(*self)
+    }
+}
+
+/// A mesh patch during the build.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct WorkPatch {
+    pub vertices: Vec<WorkVertex>,
+    pub indices: Vec<u32>,
+}
+
+impl WorkPatch {
+    pub fn triangle_count(&self) -> usize {
+        self.indices.len() / 3
+    }
+
+    /// Serialise for the spool: `u32 vertex_count, u32 index_count, vertices, indices`.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut out = Vec::with_capacity(8 + self.vertices.len() * 36 + self.indices.len() * 4);
+        out.extend_from_slice(&(self.vertices.len() as u32).to_le_bytes());
+        out.extend_from_slice(&(self.indices.len() as u32).to_le_bytes());
+        out.extend_from_slice(bytemuck::cast_slice(&self.vertices));
+        out.extend_from_slice(bytemuck::cast_slice(&self.indices));
+        out
+    }
+
+    /// Inverse of [`WorkPatch::to_bytes`]; `None` if the bytes are not a patch (the spool
+    /// is our own temporary file, so this only fails on disk corruption).
+    pub fn from_bytes(b: &[u8]) -> Option<WorkPatch> {
+        let vc = u32::from_le_bytes(b.get(0..4)?.try_into().ok()?) as usize;
+        let ic = u32::from_le_bytes(b.get(4..8)?.try_into().ok()?) as usize;
+        let vb = b.get(8..8 + vc * 36)?;
+        let ib = b.get(8 + vc * 36..8 + vc * 36 + ic * 4)?;
+        let vertices = vb.chunks_exact(36).map(bytemuck::pod_read_unaligned).collect();
+        let indices = ib.chunks_exact(4).map(bytemuck::pod_read_unaligned).collect();
+        Some(WorkPatch { vertices, indices })
+    }
+
+    /// Reorder for the GPU: vertex-cache order for triangles, then vertices in first-use
+    /// order (meshoptimizer), which also helps the index and vertex codecs.
+    pub fn optimize(&mut self) {
+        if self.indices.is_empty() {
+            self.vertices.clear();
+            return;
+        }
+        let mut idx = meshopt::optimize_vertex_cache(&self.indices, self.vertices.len());
+        let verts = meshopt::optimize_vertex_fetch(&mut idx, &self.vertices);
+        self.indices = idx;
+        self.vertices = verts;
+    }
+
+    /// Tight sphere, in model units relative to the cube origin.
+    pub fn tight_sphere(&self, step: f64) -> Sphere {
+        Sphere::of_points(self.vertices.iter().map(move |v| grid_to_local(v.q, step)))
+    }
+
+    /// Normal cone of the triangles (geometric normals of the quantised positions).
+    pub fn normal_cone(&self) -> [f32; 4] {
+        let normals: Vec<[f64; 3]> = self
+            .indices
+            .chunks_exact(3)
+            .map(|t| {
+                let p = |i: u32| self.vertices[i as usize].q.map(|c| c as f64);
+                face_normal(p(t[0]), p(t[1]), p(t[2]))
+            })
+            .collect();
+        normal_cone(&normals)
+    }
+}
+
+/// Model units relative to the cube origin.
+pub fn grid_to_local(q: [u32; 3], step: f64) -> [f64; 3] {
+    [q[0] as f64 * step, q[1] as f64 * step, q[2] as f64 * step]
+}
+
+/// Area-weighted (unnormalised) normal of a triangle.
+pub fn face_normal(a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> [f64; 3] {
+    let u = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+    let v = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
+    [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]]
+}
+
+/// Welds vertices with identical bytes into one indexed mesh, remembering where every
+/// input vertex went.
+#[derive(Default)]
+pub struct Welder {
+    map: HashMap<VertexKey, u32>,
+    pub vertices: Vec<WorkVertex>,
+}
+
+impl Welder {
+    pub fn with_capacity(n: usize) -> Welder {
+        Welder { map: HashMap::with_capacity(n), vertices: Vec::with_capacity(n) }
+    }
+
+    /// Index of `v` in the welded mesh (added if new).
+    pub fn add(&mut self, v: &WorkVertex) -> u32 {
+        let next = self.vertices.len() as u32;
+        let id = *self.map.entry(v.key()).or_insert(next);
+        if id == next {
+            self.vertices.push(*v);
+        }
+        id
+    }
+}
+
+/// Counts of what a patch clean-up removed.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct CleanupCounts {
+    pub degenerate: u64,
+    pub duplicate: u64,
+}
+
+/// Drop triangles with repeated vertices and exact duplicates (same vertices, same
+/// orientation); keeps first occurrences in order.
+pub fn remove_bad_triangles(indices: &mut Vec<u32>) -> CleanupCounts {
+    let mut counts = CleanupCounts::default();
+    let mut seen = std::collections::HashSet::with_capacity(indices.len() / 3);
+    let mut out = Vec::with_capacity(indices.len());
+    for t in indices.chunks_exact(3) {
+        if t[0] == t[1] || t[1] == t[2] || t[0] == t[2] {
+            counts.degenerate += 1;
+            continue;
+        }
+        // Canonical rotation keeps orientation: start at the smallest index.
+        let r = (0..3).min_by_key(|&i| t[i]).unwrap_or(0);
+        let key = [t[r], t[(r + 1) % 3], t[(r + 2) % 3]];
+        if !seen.insert(key) {
+            counts.duplicate += 1;
+            continue;
+        }
+        out.extend_from_slice(t);
+    }
+    *indices = out;
+    counts
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn v(x: u32) -> WorkVertex {
+        WorkVertex { q: [x, 0, 0], ..Default::default() }
+    }
+
+    #[test]
+    fn spool_bytes_round_trip() {
+        let p = WorkPatch { vertices: vec![v(1), v(2), v(3)], indices: vec![0, 1, 2] };
+        assert_eq!(WorkPatch::from_bytes(&p.to_bytes()), Some(p));
+        assert_eq!(WorkPatch::from_bytes(&[1, 0, 0]), None);
+    }
+
+    #[test]
+    fn welder_merges_identical_bytes_only() {
+        let mut w = Welder::default();
+        assert_eq!(w.add(&v(1)), 0);
+        assert_eq!(w.add(&v(2)), 1);
+        assert_eq!(w.add(&v(1)), 0);
+        let mut c = v(1);
+        c.color = [1, 2, 3, 4];
+        assert_eq!(w.add(&c), 2, "same position, other colour: a seam, not the same vertex");
+    }
+
+    #[test]
+    fn bad_triangles_removed_orientation_kept() {
+        // Why: duplicate faces would make edges non-manifold; a flipped copy is kept because
+        // it is real (two-sided) geometry, not a duplicate.
+        let mut idx = vec![0, 1, 2, 1, 2, 0, 0, 0, 1, 2, 1, 0];
+        let c = remove_bad_triangles(&mut idx);
+        assert_eq!(idx, vec![0, 1, 2, 2, 1, 0]);
+        assert_eq!(c, CleanupCounts { degenerate: 1, duplicate: 1 });
+    }
+}

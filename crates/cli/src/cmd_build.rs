@@ -1,0 +1,111 @@
+//! `tessera build`.
+
+use crate::progress::Bars;
+use anyhow::Context;
+use serde_json::json;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use tessera_build::{build, BuildOptions, BuildReport};
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// Input mesh: .ply (ascii or binary), .obj or .stl.
+    input: PathBuf,
+    /// Output model.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Memory budget for the build's buffers (e.g. 512M, 1G).
+    #[arg(long, default_value = "1G", value_parser = crate::parse_bytes)]
+    memory: u64,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Quantization: 2^bits grid cells along the bounding cube's edge (1..=21).
+    #[arg(long, default_value_t = 16)]
+    quant_bits: u32,
+    /// Most triangles per leaf.
+    #[arg(long, default_value_t = 4000)]
+    leaf_triangles: u32,
+    /// Target triangles per internal node.
+    #[arg(long, default_value_t = 2000)]
+    node_triangles: u32,
+    /// Directory for temporary files (default: beside the output).
+    #[arg(long)]
+    tmp_dir: Option<PathBuf>,
+    /// Print the report as JSON on stdout.
+    #[arg(long)]
+    json: bool,
+    /// No progress bars.
+    #[arg(short, long)]
+    quiet: bool,
+}
+
+pub fn run(a: Args) -> anyhow::Result<ExitCode> {
+    let opts = BuildOptions {
+        memory_bytes: a.memory,
+        threads: a.threads,
+        quant_bits: a.quant_bits,
+        leaf_triangles: a.leaf_triangles,
+        node_triangles: a.node_triangles,
+        tmp_dir: a.tmp_dir,
+    };
+    let bars = Bars::new(a.quiet || a.json);
+    let r = build(&a.input, &a.output, &opts, &bars).with_context(|| format!("building {}", a.output.display()))?;
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&report_json(&r))?);
+    } else {
+        print_report(&a.output, &r);
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+pub fn report_json(r: &BuildReport) -> serde_json::Value {
+    json!({
+        "input_vertices": r.input_vertices,
+        "input_triangles": r.input_triangles,
+        "normals_computed": r.normals_computed,
+        "nodes": r.nodes,
+        "leaves": r.leaves,
+        "levels": r.levels,
+        "stored_triangles": r.stored_triangles,
+        "output_bytes": r.output_bytes,
+        "bytes_per_input_triangle": r.bytes_per_input_triangle(),
+        "seconds": r.seconds,
+        "input_triangles_per_second": r.triangles_per_second(),
+        "quantization": { "step": r.quant_step, "max_error": r.quant_error_max },
+        "max_error": r.max_error,
+        "stages": r.stage_seconds.iter().map(|(n, s)| json!({"stage": n, "seconds": s})).collect::<Vec<_>>(),
+        "warnings": {
+            "degenerate_triangles_removed": r.degenerate_triangles_removed,
+            "duplicate_triangles_removed": r.duplicate_triangles_removed,
+            "oversized_leaves": r.oversized_leaves,
+            "import_degenerate_faces_skipped": r.import.degenerate_faces_skipped,
+            "import_short_faces_skipped": r.import.short_faces_skipped,
+            "import_polygons_triangulated": r.import.polygons_triangulated,
+            "import_ignored_statements": r.import.ignored_statements,
+        }
+    })
+}
+
+fn print_report(out: &std::path::Path, r: &BuildReport) {
+    println!("built {}", out.display());
+    println!("  input        {} triangles, {} vertices{}", r.input_triangles, r.input_vertices, if r.normals_computed { " (normals computed)" } else { "" });
+    println!("  hierarchy    {} nodes ({} leaves), {} levels, {} triangles stored", r.nodes, r.leaves, r.levels, r.stored_triangles);
+    println!("  output       {} bytes, {:.2} bytes/input triangle", r.output_bytes, r.bytes_per_input_triangle());
+    println!("  quantization step {:.3e}, max error {:.3e} (model units)", r.quant_step, r.quant_error_max);
+    println!("  coarsest error {:.4e} (model units)", r.max_error);
+    println!("  time         {:.2} s, {:.0} input triangles/s", r.seconds, r.triangles_per_second());
+    for (n, s) in &r.stage_seconds {
+        println!("    {n:<16} {s:.2} s");
+    }
+    let w = r.degenerate_triangles_removed + r.duplicate_triangles_removed + r.import.degenerate_faces_skipped + r.import.short_faces_skipped;
+    if w > 0 || r.oversized_leaves > 0 {
+        println!(
+            "  warnings     {} degenerate and {} duplicate triangles removed, {} bad faces skipped at import, {} leaves over the triangle limit",
+            r.degenerate_triangles_removed,
+            r.duplicate_triangles_removed,
+            r.import.degenerate_faces_skipped + r.import.short_faces_skipped,
+            r.oversized_leaves
+        );
+    }
+}

@@ -1,0 +1,51 @@
+//! Maps the libraries' `Progress` reports to indicatif bars on stderr (hidden when stderr
+//! is not a terminal, so logs and CI output stay clean).
+
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use std::sync::Mutex;
+use tessera_build::Progress;
+
+pub struct Bars {
+    bar: Mutex<Option<ProgressBar>>,
+    quiet: bool,
+}
+
+impl Bars {
+    pub fn new(quiet: bool) -> Bars {
+        Bars { bar: Mutex::new(None), quiet }
+    }
+}
+
+impl Progress for Bars {
+    fn stage(&self, name: &str, total: u64) {
+        let Ok(mut b) = self.bar.lock() else { return };
+        if let Some(old) = b.take() {
+            old.finish_and_clear();
+        }
+        let bar = if self.quiet { ProgressBar::hidden() } else { ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr()) };
+        let style = if total > 0 {
+            ProgressStyle::with_template("{msg:>22} [{bar:40}] {human_pos}/{human_len} ({per_sec}, {eta})")
+        } else {
+            ProgressStyle::with_template("{msg:>22} {spinner} {human_pos}")
+        };
+        if let Ok(s) = style {
+            bar.set_style(s.progress_chars("=> "));
+        }
+        bar.set_message(name.to_string());
+        *b = Some(bar);
+    }
+    fn advance(&self, n: u64) {
+        if let Ok(b) = self.bar.lock() {
+            if let Some(bar) = b.as_ref() {
+                bar.inc(n);
+            }
+        }
+    }
+    fn finish_stage(&self) {
+        if let Ok(mut b) = self.bar.lock() {
+            if let Some(bar) = b.take() {
+                bar.finish_and_clear();
+            }
+        }
+    }
+}

@@ -1,0 +1,363 @@
+//! Writer + reader + verifier: round trips, atomic writes, corruption detection.
+
+mod common;
+
+use common::model::{list, Fixture};
+use proptest::prelude::*;
+use tessera_format::*;
+
+fn rotate_min_first(indices: &[u32]) -> Vec<[u32; 3]> {
+    indices
+        .chunks(3)
+        .map(|t| {
+            // Lexicographically smallest rotation: canonical even for degenerate triangles.
+            (0..3)
+                .map(|m| [t[m], t[(m + 1) % 3], t[(m + 2) % 3]])
+                .min()
+                .unwrap()
+        })
+        .collect()
+}
+
+fn assert_patch_eq(got: &PatchData, want: &PatchData) {
+    assert_eq!(got.positions, want.positions);
+    assert_eq!(got.morph_targets, want.morph_targets);
+    assert_eq!(got.colors, want.colors);
+    assert_eq!(got.uvs, want.uvs);
+    let oct: Vec<[f32; 3]> = want
+        .normals
+        .iter()
+        .map(|&n| oct_decode(oct_encode(n)))
+        .collect();
+    assert_eq!(got.normals, oct);
+    assert_eq!(
+        rotate_min_first(&got.indices),
+        rotate_min_first(&want.indices)
+    );
+}
+
+#[test]
+fn round_trip() {
+    let f = Fixture::new();
+    let m = Model::open(&f.path).unwrap();
+    let h = m.header();
+    assert_eq!(h.magic, MAGIC);
+    assert_eq!(h.version, FORMAT_VERSION);
+    assert_eq!(h.node_count, 4);
+    assert_eq!(h.file_bytes, std::fs::metadata(&f.path).unwrap().len());
+    assert_eq!(h.cube_origin, f.header.cube_origin);
+    assert_eq!(h.max_error, 0.5);
+    assert_eq!(m.nodes().len(), f.nodes.len());
+    for (i, (got, want)) in m.nodes().iter().zip(&f.nodes).enumerate() {
+        assert_eq!(got.patch_bytes, f.spooled[i].bytes);
+        assert_eq!(got.patch_crc32, f.spooled[i].crc32);
+        let mut g = *got;
+        g.patch_offset = 0;
+        g.patch_bytes = 0;
+        g.patch_crc32 = 0;
+        assert_eq!(&g, want, "node {i}");
+        let raw = m.patch_bytes(i).unwrap();
+        assert_eq!(raw, f.spool.read(&f.spooled[i]).unwrap());
+        assert_patch_eq(&m.decode_patch(i).unwrap(), &f.patches[i]);
+        m.advise_willneed(i);
+    }
+    assert!((m.quant_step() - 0.001).abs() < 1e-15);
+    assert_eq!(m.model_position([0, 1000, 5000]), [1000.0, 2001.0, 0.0]);
+    let report = verify_structure(&m);
+    assert!(report.is_valid(), "{:?}", report.problems);
+    assert_eq!(report.checked_nodes, 4);
+    // Only the model and the spool in the directory: no temp files left.
+    assert_eq!(f.files_in_dir().len(), 2, "{:?}", f.files_in_dir());
+    assert!(m.patch_bytes(4).is_err());
+}
+
+#[test]
+fn spool_is_deleted_on_drop_and_thread_safe() {
+    let dir = tempfile::tempdir().unwrap();
+    let spool = PatchSpool::new(dir.path()).unwrap();
+    let path = spool.path().to_path_buf();
+    let results: Vec<(Vec<u8>, SpooledPatch)> = std::thread::scope(|s| {
+        let hs: Vec<_> = (0..4u8)
+            .map(|t| {
+                let spool = &spool;
+                s.spawn(move || {
+                    (0..50u8)
+                        .map(|k| {
+                            let bytes = vec![t ^ k; 100 + k as usize * 7];
+                            let sp = spool.append(&bytes).unwrap();
+                            (bytes, sp)
+                        })
+                        .collect::<Vec<_>>()
+                })
+            })
+            .collect();
+        hs.into_iter().flat_map(|h| h.join().unwrap()).collect()
+    });
+    for (bytes, sp) in &results {
+        assert_eq!(&spool.read(sp).unwrap(), bytes);
+        assert_eq!(sp.crc32, crc32fast::hash(bytes));
+    }
+    assert!(path.exists());
+    drop(spool);
+    assert!(!path.exists());
+    assert!(list(dir.path()).is_empty());
+}
+
+#[test]
+fn failed_write_leaves_nothing_and_keeps_old_file() {
+    let f = Fixture::new();
+    let before = f.bytes();
+    let files_before = f.files_in_dir();
+    // A patch beyond the spool's end: the copy fails midway.
+    let mut bad = f.spooled.clone();
+    bad[2].offset = f.spool.len() + 10;
+    let err = write_model(&f.path, &f.header, &f.nodes, &bad, &f.spool).unwrap_err();
+    assert!(matches!(err, FormatError::InvalidInput { .. }), "{err}");
+    assert_eq!(f.bytes(), before);
+    assert_eq!(f.files_in_dir(), files_before);
+    // A patch whose CRC does not match the spool bytes.
+    let mut bad = f.spooled.clone();
+    bad[3].crc32 ^= 1;
+    let err = write_model(&f.path, &f.header, &f.nodes, &bad, &f.spool).unwrap_err();
+    assert!(
+        matches!(err, FormatError::PatchChecksum { node: 3 }),
+        "{err}"
+    );
+    assert_eq!(f.bytes(), before);
+    assert_eq!(f.files_in_dir(), files_before);
+    // A fresh destination stays absent.
+    let fresh = f.dir.path().join("fresh.tsr");
+    assert!(write_model(&fresh, &f.header, &f.nodes, &bad, &f.spool).is_err());
+    assert!(!fresh.exists());
+    assert_eq!(f.files_in_dir(), files_before);
+    // Mismatched lengths.
+    assert!(write_model(&fresh, &f.header, &f.nodes[..2], &f.spooled, &f.spool).is_err());
+    assert!(!fresh.exists());
+}
+
+fn flip(bytes: &[u8], at: usize) -> Vec<u8> {
+    let mut b = bytes.to_vec();
+    b[at] ^= 0x10;
+    b
+}
+
+#[test]
+fn corruption_is_detected() {
+    let f = Fixture::new();
+    let good = f.bytes();
+    let m = Model::open(&f.path).unwrap();
+    let h = *m.header();
+
+    let e = f.open_bytes("magic", &flip(&good, 1)).unwrap_err();
+    assert!(matches!(e, FormatError::BadMagic), "{e}");
+    let e = f.open_bytes("hdr", &flip(&good, 100)).unwrap_err();
+    assert!(matches!(e, FormatError::HeaderChecksum), "{e}");
+    let e = f
+        .open_bytes("table", &flip(&good, 256 + 128 + 60))
+        .unwrap_err();
+    assert!(matches!(e, FormatError::NodeTableChecksum), "{e}");
+
+    // Newer version, with and without a recomputed header CRC.
+    let mut b = good.clone();
+    b[8..12].copy_from_slice(&(FORMAT_VERSION + 1).to_le_bytes());
+    let e = f.open_bytes("ver1", &b).unwrap_err();
+    assert!(
+        matches!(
+            e,
+            FormatError::UnsupportedVersion {
+                found: 2,
+                supported: 1
+            }
+        ),
+        "{e}"
+    );
+    let mut hh = h;
+    hh.version = FORMAT_VERSION + 1;
+    hh.header_crc32 = header_crc32(&hh);
+    b[..256].copy_from_slice(bytemuck::bytes_of(&hh));
+    let e = f.open_bytes("ver2", &b).unwrap_err();
+    assert!(matches!(e, FormatError::UnsupportedVersion { .. }), "{e}");
+
+    // Truncations.
+    for cut in [0, 7, 8, 100, 255, 256, 300, good.len() - 1] {
+        let e = f.open_bytes("trunc", &good[..cut]).unwrap_err();
+        assert!(matches!(e, FormatError::Truncated { .. }), "cut {cut}: {e}");
+    }
+    let mut longer = good.clone();
+    longer.push(0);
+    assert!(f.open_bytes("long", &longer).is_err());
+
+    // A flipped patch byte: open succeeds, that patch fails its CRC, others are fine.
+    let n2 = m.nodes()[2];
+    let at = n2.patch_offset as usize + n2.patch_bytes as usize / 2;
+    let bad = f.open_bytes("patch", &flip(&good, at)).unwrap();
+    assert!(matches!(
+        bad.patch_bytes(2),
+        Err(FormatError::PatchChecksum { node: 2 })
+    ));
+    assert!(matches!(
+        bad.decode_patch(2),
+        Err(FormatError::PatchChecksum { node: 2 })
+    ));
+    assert!(bad.decode_patch(1).is_ok());
+    let report = verify_structure(&bad);
+    assert_eq!(report.problem_count, 1, "{:?}", report.problems);
+
+    // Patch range outside the patch section (valid checksums, bad offset).
+    let mut nodes = m.nodes().to_vec();
+    nodes[1].patch_offset = h.file_bytes - 4;
+    let b = with_nodes(&good, &h, &nodes);
+    let e = f.open_bytes("range", &b).unwrap_err();
+    assert!(matches!(e, FormatError::PatchOutOfRange { node: 1 }), "{e}");
+
+    // Child index out of range.
+    let mut nodes = m.nodes().to_vec();
+    nodes[0].children[1] = 77;
+    let e = f
+        .open_bytes("child", &with_nodes(&good, &h, &nodes))
+        .unwrap_err();
+    assert!(matches!(e, FormatError::InvalidNode { node: 0, .. }), "{e}");
+
+    // Node counts that disagree with the patch: a decode error naming the node.
+    let mut nodes = m.nodes().to_vec();
+    nodes[3].triangle_count += 1;
+    let cm = f
+        .open_bytes("counts", &with_nodes(&good, &h, &nodes))
+        .unwrap();
+    let e = cm.decode_patch(3).unwrap_err();
+    assert!(
+        matches!(e, FormatError::CorruptPatch { node: 3, .. }),
+        "{e}"
+    );
+    assert!(e.to_string().contains("node 3"), "{e}");
+}
+
+/// Replaces the node table of a valid file and recomputes both checksums.
+fn with_nodes(good: &[u8], h: &Header, nodes: &[NodeRecord]) -> Vec<u8> {
+    let mut b = good.to_vec();
+    let table: &[u8] = bytemuck::cast_slice(nodes);
+    b[256..256 + table.len()].copy_from_slice(table);
+    let mut hh = *h;
+    hh.node_table_crc32 = crc32fast::hash(table);
+    hh.header_crc32 = header_crc32(&hh);
+    b[..256].copy_from_slice(bytemuck::bytes_of(&hh));
+    b
+}
+
+#[test]
+fn verify_flags_structural_problems() {
+    let f = Fixture::new();
+    let check = |nodes: &[NodeRecord], header: Option<Header>, expect: &str| {
+        let path = f.dir.path().join("v.tsr");
+        let h = header.unwrap_or(f.header);
+        write_model(&path, &h, nodes, &f.spooled, &f.spool).unwrap();
+        let m = Model::open(&path).unwrap();
+        let r = verify_structure(&m);
+        assert!(!r.is_valid(), "expected a problem containing {expect:?}");
+        assert!(
+            r.problems.iter().any(|p| p.contains(expect)),
+            "expected {expect:?} in {:?}",
+            r.problems
+        );
+    };
+    let mut n = f.nodes.clone();
+    n[2].error = 0.6;
+    check(&n, None, "larger than parent 0");
+    let mut n = f.nodes.clone();
+    n[3].saturated_sphere[3] *= 100.0;
+    check(&n, None, "saturated sphere not inside parent");
+    let mut n = f.nodes.clone();
+    n[1].tight_sphere[3] *= 0.5;
+    n[1].saturated_sphere = n[1].tight_sphere;
+    check(&n, None, "outside the tight sphere");
+    let mut n = f.nodes.clone();
+    n[3].diamond = n[2].diamond;
+    check(&n, None, "diamond");
+    let mut n = f.nodes.clone();
+    n[3].flags = 0;
+    check(&n, None, "leaf flag");
+    let mut n = f.nodes.clone();
+    n[3].root = 1;
+    check(&n, None, "root 1 differs");
+    let mut n = f.nodes.clone();
+    n[0].children = [2, NO_NODE];
+    check(&n, None, "does not list it");
+    let mut n = f.nodes.clone();
+    n[2].quant_min[0] += 5000; // decoded positions move with quant_min
+    check(&n, None, "outside the tight sphere");
+    let mut h = f.header;
+    h.max_error = 0.25;
+    check(&f.nodes, Some(h), "max_error");
+    // A single child is fine.
+    let mut n = f.nodes.clone();
+    n[0].children = [NO_NODE, 3];
+    n[2].parent = 1;
+    n[2].root = 1;
+    n[1].children = [2, NO_NODE];
+    n[1].flags = 0;
+    n[1].error = 0.5;
+    n[1].saturated_sphere = n[0].saturated_sphere;
+    n[1].saturated_sphere[3] *= 4.0;
+    let path = f.dir.path().join("single.tsr");
+    write_model(&path, &f.header, &n, &f.spooled, &f.spool).unwrap();
+    let r = verify_structure(&Model::open(&path).unwrap());
+    assert!(r.is_valid(), "{:?}", r.problems);
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+
+    /// Any truncation or single-byte change of a valid file is an error somewhere
+    /// (open, patch read, or verify), never a panic.
+    #[test]
+    fn damaged_files_never_panic(cut in 0usize..100_000, at in 0usize..100_000, xor in 1u8..=255) {
+        let f = Fixture::new();
+        let good = f.bytes();
+        let cut = cut % good.len();
+        prop_assert!(f.open_bytes("cut", &good[..cut]).is_err());
+        let mut b = good.clone();
+        let at = at % good.len();
+        b[at] ^= xor;
+        match f.open_bytes("flip", &b) {
+            Err(_) => {}
+            Ok(m) => {
+                let r = verify_structure(&m);
+                prop_assert!(!r.is_valid(), "byte {} flip {:#x} went unnoticed", at, xor);
+            }
+        }
+    }
+
+    #[test]
+    fn random_files_never_panic(bytes in proptest::collection::vec(any::<u8>(), 0..2000), magic in any::<bool>()) {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("r.tsr");
+        let mut bytes = bytes;
+        if magic && bytes.len() >= 8 {
+            bytes[..8].copy_from_slice(&MAGIC);
+        }
+        std::fs::write(&p, &bytes).unwrap();
+        prop_assert!(Model::open(&p).is_err());
+    }
+}
+
+/// Keeps docs/format.md's offset tables honest.
+#[test]
+fn documented_offsets() {
+    use std::mem::offset_of;
+    assert_eq!(offset_of!(Header, quant_bits), 20);
+    assert_eq!(offset_of!(Header, file_bytes), 56);
+    assert_eq!(offset_of!(Header, cube_origin), 80);
+    assert_eq!(offset_of!(Header, bounding_sphere), 112);
+    assert_eq!(offset_of!(Header, root_count), 144);
+    assert_eq!(offset_of!(Header, node_table_crc32), 164);
+    assert_eq!(offset_of!(Header, header_crc32), 168);
+    assert_eq!(offset_of!(Header, reserved), 172);
+    assert_eq!(offset_of!(NodeRecord, patch_bytes), 16);
+    assert_eq!(offset_of!(NodeRecord, children), 32);
+    assert_eq!(offset_of!(NodeRecord, level), 48);
+    assert_eq!(offset_of!(NodeRecord, error), 52);
+    assert_eq!(offset_of!(NodeRecord, tight_sphere), 56);
+    assert_eq!(offset_of!(NodeRecord, normal_cone), 88);
+    assert_eq!(offset_of!(NodeRecord, quant_min), 104);
+    assert_eq!(offset_of!(NodeRecord, reserved), 116);
+}

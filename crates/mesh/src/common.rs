@@ -1,0 +1,101 @@
+//! Pieces every importer shares: turning a polygon into triangles (or counting why it
+//! was dropped) and logging the skip counts, so PLY, OBJ and STL treat bad faces alike.
+
+use std::path::Path;
+
+use crate::{ImportReport, MeshError, MeshVisitor};
+
+/// Fan-triangulates polygons and drops short or degenerate ones, counting each case.
+#[derive(Default)]
+pub(crate) struct PolygonEmitter {
+    scratch: Vec<u32>,
+}
+
+impl PolygonEmitter {
+    /// Deliver the polygon `corners` (already validated indices) as triangles.
+    ///
+    /// Fewer than 3 corners: counted in `short_faces_skipped`. Any index repeated: the
+    /// whole face is counted in `degenerate_faces_skipped`. More than 3 corners: fan
+    /// `(0, i, i + 1)`, counted in `polygons_triangulated`.
+    #[inline]
+    pub(crate) fn emit(
+        &mut self,
+        corners: &[u32],
+        visitor: &mut dyn MeshVisitor,
+        report: &mut ImportReport,
+    ) -> Result<(), MeshError> {
+        match *corners {
+            [a, b, c] => {
+                if a == b || b == c || a == c {
+                    report.degenerate_faces_skipped += 1;
+                } else {
+                    visitor.triangle([a, b, c])?;
+                    report.triangles += 1;
+                }
+                Ok(())
+            }
+            [] | [_] | [_, _] => {
+                report.short_faces_skipped += 1;
+                Ok(())
+            }
+            [first, ..] => self.emit_polygon(first, corners, visitor, report),
+        }
+    }
+
+    fn emit_polygon(
+        &mut self,
+        first: u32,
+        corners: &[u32],
+        visitor: &mut dyn MeshVisitor,
+        report: &mut ImportReport,
+    ) -> Result<(), MeshError> {
+        self.scratch.clear();
+        self.scratch.extend_from_slice(corners);
+        self.scratch.sort_unstable();
+        if self.scratch.windows(2).any(|w| w[0] == w[1]) {
+            report.degenerate_faces_skipped += 1;
+            return Ok(());
+        }
+        for pair in corners[1..].windows(2) {
+            visitor.triangle([first, pair[0], pair[1]])?;
+            report.triangles += 1;
+        }
+        report.polygons_triangulated += 1;
+        Ok(())
+    }
+}
+
+/// Log each kind of skipped input once, with its count.
+pub(crate) fn log_skips(path: &Path, report: &ImportReport) {
+    let p = path.display();
+    if report.degenerate_faces_skipped > 0 {
+        tracing::warn!(
+            "{p}: skipped {} degenerate faces (a vertex index repeated)",
+            report.degenerate_faces_skipped
+        );
+    }
+    if report.short_faces_skipped > 0 {
+        tracing::warn!(
+            "{p}: skipped {} faces with fewer than 3 corners",
+            report.short_faces_skipped
+        );
+    }
+    if report.ignored_statements > 0 {
+        tracing::warn!(
+            "{p}: ignored {} unsupported statements or elements",
+            report.ignored_statements
+        );
+    }
+    if report.polygons_triangulated > 0 {
+        tracing::debug!("{p}: fan-triangulated {} polygons", report.polygons_triangulated);
+    }
+}
+
+/// Fail with [`MeshError::Empty`] when nothing usable was read, else log the skips.
+pub(crate) fn finish_report(path: &Path, report: ImportReport) -> Result<ImportReport, MeshError> {
+    log_skips(path, &report);
+    if report.triangles == 0 {
+        return Err(MeshError::Empty { path: path.to_path_buf() });
+    }
+    Ok(report)
+}

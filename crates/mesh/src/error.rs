@@ -1,0 +1,103 @@
+//! The one error type of the mesh crate.
+//!
+//! Every variant names the file it concerns and displays as a single line
+//! `"{path}: {problem}"`, so a user who feeds Tessera a broken file learns which file and
+//! what is wrong with it without reading a backtrace.
+
+use std::path::PathBuf;
+
+/// Why a mesh could not be read or written.
+#[derive(Debug, thiserror::Error)]
+pub enum MeshError {
+    /// The operating system refused a read, write, rename, ...
+    #[error("{}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// The file extension is not one of `.ply`, `.obj`, `.stl` (or the content matches none).
+    #[error("{}: unknown mesh format (expected .ply, .obj or .stl)", path.display())]
+    UnknownFormat { path: PathBuf },
+    /// The file ends before the data its header (or syntax) promises.
+    #[error("{}: file is truncated: {detail}", path.display())]
+    Truncated { path: PathBuf, detail: String },
+    /// The content violates the format. `line_or_offset` is e.g. `line 12` or `byte 4096`.
+    #[error("{}: {line_or_offset}: {detail}", path.display())]
+    Malformed { path: PathBuf, line_or_offset: String, detail: String },
+    /// A face references a vertex that does not exist.
+    #[error(
+        "{}: {line_or_offset}: vertex index {index} out of range (the mesh has {vertex_count} vertices)",
+        path.display()
+    )]
+    IndexOutOfRange { path: PathBuf, line_or_offset: String, index: i64, vertex_count: u64 },
+    /// A vertex position is NaN or infinite.
+    #[error("{}: vertex {vertex} has a non-finite coordinate (NaN or infinity)", path.display())]
+    NonFinite { path: PathBuf, vertex: u64 },
+    /// The file holds no triangle at all (after skipping degenerate faces).
+    #[error("{}: the mesh has no triangles", path.display())]
+    Empty { path: PathBuf },
+    /// More vertices than a `u32` index can address.
+    #[error("{}: more than {} vertices; Tessera indexes vertices with 32 bits", path.display(), u32::MAX)]
+    TooManyVertices { path: PathBuf },
+    /// A writer was used against its contract (counts, order).
+    #[error("{}: {detail}", path.display())]
+    Usage { path: PathBuf, detail: String },
+    /// An error raised by a [`crate::MeshVisitor`], passed through unchanged.
+    #[error("{0}")]
+    Visitor(String),
+}
+
+impl MeshError {
+    /// Shorthand for [`MeshError::Io`].
+    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> MeshError {
+        MeshError::Io { path: path.into(), source }
+    }
+
+    /// Shorthand for [`MeshError::Malformed`].
+    pub fn malformed(
+        path: impl Into<PathBuf>,
+        line_or_offset: impl Into<String>,
+        detail: impl Into<String>,
+    ) -> MeshError {
+        MeshError::Malformed {
+            path: path.into(),
+            line_or_offset: line_or_offset.into(),
+            detail: detail.into(),
+        }
+    }
+
+    /// Shorthand for [`MeshError::Truncated`].
+    pub fn truncated(path: impl Into<PathBuf>, detail: impl Into<String>) -> MeshError {
+        MeshError::Truncated { path: path.into(), detail: detail.into() }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn display_is_one_line_starting_with_path() {
+        let errors = [
+            MeshError::io("/a/b.ply", std::io::Error::other("boom")),
+            MeshError::UnknownFormat { path: "/a/b.xyz".into() },
+            MeshError::truncated("/a/b.ply", "expected 3 vertices, got 2"),
+            MeshError::malformed("/a/b.obj", "line 3", "bad number"),
+            MeshError::IndexOutOfRange {
+                path: "/a/b.obj".into(),
+                line_or_offset: "line 4".into(),
+                index: 7,
+                vertex_count: 3,
+            },
+            MeshError::NonFinite { path: "/a/b.ply".into(), vertex: 2 },
+            MeshError::Empty { path: "/a/b.ply".into() },
+            MeshError::TooManyVertices { path: "/a/b.ply".into() },
+        ];
+        for e in errors {
+            let s = e.to_string();
+            assert!(s.starts_with("/a/b."), "{s}");
+            assert!(!s.contains('\n'), "{s}");
+        }
+    }
+}

@@ -1,0 +1,435 @@
+//! Wavefront OBJ importer, streamed where the format allows it.
+//!
+//! OBJ is the lingua franca of scanned and hand-made models (the bunny, Nefertiti). Its
+//! faces index positions, texture coordinates and normals separately, while Tessera's
+//! vertices carry all three, so the reader works in one of two modes, chosen by a cheap
+//! first pass over the file (line prefixes only, stopping early when it can):
+//!
+//! * **direct**: no face references a `vt` or `vn`. Every `v` is delivered as a vertex
+//!   the moment it is read (vertex index = position index) and memory stays O(1) besides
+//!   the line buffer. Unreferenced `vt`/`vn` statements are ignored.
+//! * **combined**: some face corner references a `vt` or `vn`. The output vertices are the
+//!   distinct (v, vt, vn) combinations, created when a face first uses them. This keeps
+//!   every position, uv and normal in memory plus a hash map from combination to output
+//!   index, so memory grows with the mesh (roughly 60 bytes per distinct corner); OBJ's
+//!   separate indexing makes that unavoidable without a second, random-access pass.
+//!
+//! Vertex colours follow the common `v x y z r g b` extension (floats in 0..1).
+
+use std::collections::HashMap;
+use std::fs::File;
+use std::io::Read;
+use std::path::Path;
+
+use crate::common::{finish_report, PolygonEmitter};
+use crate::source::{ReadErr, Source};
+use crate::{Attributes, ImportReport, MeshError, MeshHeader, MeshVisitor, Vertex};
+
+/// Longest (joined) line accepted: a polygon with ~a million corners.
+const MAX_LINE: usize = 16 << 20;
+
+/// Marker for "no vt / vn" in a combination key.
+const NONE: u32 = u32::MAX;
+
+/// Read the OBJ file at `path` into `visitor`.
+pub(crate) fn read_obj(
+    path: &Path,
+    visitor: &mut dyn MeshVisitor,
+) -> Result<ImportReport, MeshError> {
+    let scan = prescan(path, open(path)?)?;
+    let attributes = Attributes { normals: scan.uses_vn, colors: scan.colors, uvs: scan.uses_vt };
+    visitor.header(&MeshHeader { attributes, vertex_count: None, face_count: None })?;
+    let mut reader = ObjReader::new(path, attributes, scan.uses_vt || scan.uses_vn);
+    let mut src = Source::new(open(path)?);
+    let mut line = Vec::new();
+    while reader.next_line(&mut src, &mut line)? {
+        reader.statement(&line, visitor)?;
+    }
+    finish_report(path, reader.report)
+}
+
+fn open(path: &Path) -> Result<File, MeshError> {
+    File::open(path).map_err(|e| MeshError::io(path, e))
+}
+
+// ---------------------------------------------------------------------------------------
+// First pass
+// ---------------------------------------------------------------------------------------
+
+/// What the first pass learns.
+#[derive(Debug, Default)]
+struct Scan {
+    /// Some face corner references a texture coordinate.
+    uses_vt: bool,
+    /// Some face corner references a normal.
+    uses_vn: bool,
+    /// The first `v` statement carries a colour.
+    colors: bool,
+}
+
+/// Look at line prefixes only; stop as soon as faces are known to use both vt and vn.
+fn prescan<R: Read>(path: &Path, reader: R) -> Result<Scan, MeshError> {
+    let mut src = Source::new(reader);
+    let mut line = Vec::new();
+    let mut scan = Scan::default();
+    let mut seen_v = false;
+    loop {
+        let more = src.line_into(&mut line, MAX_LINE).map_err(|e| read_error(path, &src, e))?;
+        if !more {
+            return Ok(scan);
+        }
+        match line.trim_ascii_start() {
+            [b'v', b' ' | b'\t', rest @ ..] if !seen_v => {
+                seen_v = true;
+                scan.colors = words(strip_comment(rest)).count() >= 6;
+            }
+            [b'f', b' ' | b'\t', rest @ ..] if line.contains(&b'/') => {
+                for corner in words(rest) {
+                    let mut parts = corner.split(|&b| b == b'/').skip(1);
+                    scan.uses_vt |= parts.next().is_some_and(|p| !p.is_empty());
+                    scan.uses_vn |= parts.next().is_some_and(|p| !p.is_empty());
+                }
+                if scan.uses_vt && scan.uses_vn && seen_v {
+                    return Ok(scan);
+                }
+            }
+            _ => {}
+        }
+    }
+}
+
+fn read_error<R: Read>(path: &Path, src: &Source<R>, e: ReadErr) -> MeshError {
+    match e {
+        ReadErr::Io(e) => MeshError::io(path, e),
+        ReadErr::Eof => MeshError::truncated(path, "unexpected end of file"),
+        ReadErr::Parse(m) => MeshError::malformed(path, format!("line {}", src.line), m),
+        ReadErr::BadIndex(i) => {
+            MeshError::malformed(path, format!("line {}", src.line), format!("bad index {i}"))
+        }
+    }
+}
+
+fn strip_comment(line: &[u8]) -> &[u8] {
+    match line.iter().position(|&b| b == b'#') {
+        Some(i) => &line[..i],
+        None => line,
+    }
+}
+
+fn words(line: &[u8]) -> impl Iterator<Item = &[u8]> {
+    line.split(|b| b.is_ascii_whitespace()).filter(|w| !w.is_empty())
+}
+
+// ---------------------------------------------------------------------------------------
+// Second pass
+// ---------------------------------------------------------------------------------------
+
+/// The in-memory tables of combined mode (see the module docs for the memory cost).
+#[derive(Default)]
+struct Combined {
+    positions: Vec<[f32; 3]>,
+    colors: Vec<[u8; 4]>,
+    uvs: Vec<[f32; 2]>,
+    normals: Vec<[f32; 3]>,
+    /// (v, vt, vn) 0-based, `NONE` when absent → output vertex index.
+    map: HashMap<[u32; 3], u32>,
+}
+
+struct ObjReader<'p> {
+    path: &'p Path,
+    attributes: Attributes,
+    /// 1-based number of the current line.
+    line_no: u64,
+    v_count: u64,
+    vt_count: u64,
+    vn_count: u64,
+    /// `Some` in combined mode.
+    combined: Option<Combined>,
+    /// Output vertices delivered so far.
+    delivered: u64,
+    corners: Vec<u32>,
+    emitter: PolygonEmitter,
+    report: ImportReport,
+}
+
+impl<'p> ObjReader<'p> {
+    fn new(path: &'p Path, attributes: Attributes, combined: bool) -> Self {
+        ObjReader {
+            path,
+            attributes,
+            line_no: 0,
+            v_count: 0,
+            vt_count: 0,
+            vn_count: 0,
+            combined: combined.then(Combined::default),
+            delivered: 0,
+            corners: Vec::new(),
+            emitter: PolygonEmitter::default(),
+            report: ImportReport::default(),
+        }
+    }
+
+    /// Read the next logical line (joining `\` continuations), comment stripped.
+    fn next_line<R: Read>(
+        &mut self,
+        src: &mut Source<R>,
+        line: &mut Vec<u8>,
+    ) -> Result<bool, MeshError> {
+        let mut part = Vec::new();
+        let mut any = false;
+        line.clear();
+        loop {
+            let more =
+                src.line_into(&mut part, MAX_LINE).map_err(|e| read_error(self.path, src, e))?;
+            if !more {
+                return Ok(any);
+            }
+            if !any {
+                self.line_no = src.line.saturating_sub(1);
+            }
+            any = true;
+            match part.strip_suffix(b"\\") {
+                Some(head) => line.extend_from_slice(head),
+                None => {
+                    line.extend_from_slice(&part);
+                    let keep = strip_comment(line).len();
+                    line.truncate(keep);
+                    return Ok(true);
+                }
+            }
+            if line.len() > MAX_LINE {
+                return Err(self.malformed(format!("line longer than {MAX_LINE} bytes")));
+            }
+        }
+    }
+
+    fn malformed(&self, detail: impl Into<String>) -> MeshError {
+        MeshError::malformed(self.path, format!("line {}", self.line_no), detail)
+    }
+
+    fn statement(&mut self, line: &[u8], visitor: &mut dyn MeshVisitor) -> Result<(), MeshError> {
+        let mut w = words(line);
+        let Some(keyword) = w.next() else {
+            return Ok(());
+        };
+        match keyword {
+            b"v" => self.position(w, visitor),
+            b"vt" => self.tex_coord(w),
+            b"vn" => self.normal(w),
+            b"f" | b"fo" => self.face(w, visitor),
+            b"o" | b"g" | b"s" | b"usemtl" | b"mtllib" | b"l" | b"p" | b"vp" => Ok(()),
+            _ => {
+                self.report.ignored_statements += 1;
+                Ok(())
+            }
+        }
+    }
+
+    /// Parse at least `min` and at most `N` floats; returns the array and how many were read.
+    fn floats<'a, const N: usize>(
+        &self,
+        what: &str,
+        min: usize,
+        w: impl Iterator<Item = &'a [u8]>,
+    ) -> Result<([f32; N], usize), MeshError> {
+        let mut out = [0f32; N];
+        let mut n = 0;
+        for word in w.take(N) {
+            out[n] = parse_f32(word).ok_or_else(|| {
+                self.malformed(format!(
+                    "{what}: '{}' is not a number",
+                    String::from_utf8_lossy(word)
+                ))
+            })?;
+            n += 1;
+        }
+        if n < min {
+            return Err(self.malformed(format!("{what} needs at least {min} numbers, found {n}")));
+        }
+        Ok((out, n))
+    }
+
+    fn position<'a>(
+        &mut self,
+        w: impl Iterator<Item = &'a [u8]>,
+        visitor: &mut dyn MeshVisitor,
+    ) -> Result<(), MeshError> {
+        let (vals, n) = self.floats::<7>("v", 3, w)?;
+        let position = [vals[0], vals[1], vals[2]];
+        if !position.iter().all(|c| c.is_finite()) {
+            return Err(MeshError::NonFinite {
+                path: self.path.to_path_buf(),
+                vertex: self.v_count,
+            });
+        }
+        let color = if n >= 6 && self.attributes.colors {
+            let alpha = if n >= 7 { vals[6] } else { 1.0 };
+            [vals[3], vals[4], vals[5], alpha].map(|c| (c * 255.0).round() as u8)
+        } else {
+            [255; 4]
+        };
+        self.v_count += 1;
+        match &mut self.combined {
+            Some(c) => {
+                c.positions.push(position);
+                if self.attributes.colors {
+                    c.colors.push(color);
+                }
+                Ok(())
+            }
+            None => {
+                let v = Vertex { position, color, ..Vertex::default() };
+                self.deliver(&v, visitor).map(drop)
+            }
+        }
+    }
+
+    fn tex_coord<'a>(&mut self, w: impl Iterator<Item = &'a [u8]>) -> Result<(), MeshError> {
+        let (vals, _) = self.floats::<3>("vt", 1, w)?;
+        self.vt_count += 1;
+        if let Some(c) = &mut self.combined {
+            c.uvs.push([vals[0], vals[1]]);
+        }
+        Ok(())
+    }
+
+    fn normal<'a>(&mut self, w: impl Iterator<Item = &'a [u8]>) -> Result<(), MeshError> {
+        let (vals, _) = self.floats::<3>("vn", 3, w)?;
+        self.vn_count += 1;
+        if let Some(c) = &mut self.combined {
+            c.normals.push(vals);
+        }
+        Ok(())
+    }
+
+    /// Hand a vertex to the visitor; returns its output index.
+    fn deliver(&mut self, v: &Vertex, visitor: &mut dyn MeshVisitor) -> Result<u32, MeshError> {
+        let index = u32::try_from(self.delivered)
+            .map_err(|_| MeshError::TooManyVertices { path: self.path.to_path_buf() })?;
+        visitor.vertex(v)?;
+        self.delivered += 1;
+        self.report.vertices += 1;
+        Ok(index)
+    }
+
+    fn face<'a>(
+        &mut self,
+        w: impl Iterator<Item = &'a [u8]>,
+        visitor: &mut dyn MeshVisitor,
+    ) -> Result<(), MeshError> {
+        let mut corners = std::mem::take(&mut self.corners);
+        corners.clear();
+        let result = self.face_corners(w, &mut corners, visitor);
+        let result = result.and_then(|()| self.emitter.emit(&corners, visitor, &mut self.report));
+        self.corners = corners;
+        result
+    }
+
+    fn face_corners<'a>(
+        &mut self,
+        w: impl Iterator<Item = &'a [u8]>,
+        corners: &mut Vec<u32>,
+        visitor: &mut dyn MeshVisitor,
+    ) -> Result<(), MeshError> {
+        for corner in w {
+            let (v, vt, vn) = self.parse_corner(corner)?;
+            let index = match self.combined.is_some() {
+                true => self.combined_vertex(v, vt, vn, visitor)?,
+                false => v,
+            };
+            corners.push(index);
+        }
+        Ok(())
+    }
+
+    /// Resolve `v[/vt][/vn]` into 0-based indices (`NONE` when absent).
+    fn parse_corner(&self, corner: &[u8]) -> Result<(u32, u32, u32), MeshError> {
+        let mut parts = corner.split(|&b| b == b'/');
+        let bad =
+            || self.malformed(format!("bad face corner '{}'", String::from_utf8_lossy(corner)));
+        let v = parts.next().filter(|p| !p.is_empty()).ok_or_else(bad)?;
+        let vt = parts.next().filter(|p| !p.is_empty());
+        let vn = parts.next().filter(|p| !p.is_empty());
+        if parts.next().is_some() {
+            return Err(bad());
+        }
+        let v = self.resolve(v, self.v_count, "vertex")?;
+        let vt = vt.map(|p| self.resolve(p, self.vt_count, "texture coordinate")).transpose()?;
+        let vn = vn.map(|p| self.resolve(p, self.vn_count, "normal")).transpose()?;
+        Ok((v, vt.unwrap_or(NONE), vn.unwrap_or(NONE)))
+    }
+
+    /// 1-based or negative (relative) OBJ index → 0-based, checked against `count`.
+    fn resolve(&self, word: &[u8], count: u64, what: &str) -> Result<u32, MeshError> {
+        let raw: i64 =
+            std::str::from_utf8(word).ok().and_then(|s| s.parse().ok()).ok_or_else(|| {
+                self.malformed(format!("bad {what} index '{}'", String::from_utf8_lossy(word)))
+            })?;
+        let resolved = match raw {
+            1.. => Some(raw - 1),
+            ..=-1 => i64::try_from(count).ok().map(|c| c + raw),
+            0 => None,
+        };
+        match resolved {
+            Some(i) if i >= 0 && (i as u64) < count => Ok(i as u32),
+            _ if what == "vertex" => Err(MeshError::IndexOutOfRange {
+                path: self.path.to_path_buf(),
+                line_or_offset: format!("line {}", self.line_no),
+                index: raw,
+                vertex_count: count,
+            }),
+            _ => {
+                Err(self
+                    .malformed(format!("{what} index {raw} out of range ({count} defined so far)")))
+            }
+        }
+    }
+
+    /// The output index of the (v, vt, vn) combination, delivering it the first time.
+    fn combined_vertex(
+        &mut self,
+        v: u32,
+        vt: u32,
+        vn: u32,
+        visitor: &mut dyn MeshVisitor,
+    ) -> Result<u32, MeshError> {
+        let Some(c) = &self.combined else {
+            return Ok(v);
+        };
+        if let Some(&i) = c.map.get(&[v, vt, vn]) {
+            return Ok(i);
+        }
+        // `resolve` checked every index against the table lengths.
+        let get = |table: &[[f32; 3]], i: u32| table.get(i as usize).copied().unwrap_or_default();
+        let vertex = Vertex {
+            position: get(&c.positions, v),
+            normal: if vn == NONE { [0.0; 3] } else { get(&c.normals, vn) },
+            color: c.colors.get(v as usize).copied().unwrap_or([255; 4]),
+            uv: c.uvs.get(vt as usize).copied().unwrap_or_default(),
+        };
+        let index = self.deliver(&vertex, visitor)?;
+        if let Some(c) = &mut self.combined {
+            c.map.insert([v, vt, vn], index);
+        }
+        Ok(index)
+    }
+}
+
+fn parse_f32(word: &[u8]) -> Option<f32> {
+    std::str::from_utf8(word).ok()?.parse().ok()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn prescan_detects_modes() {
+        let s = prescan(Path::new("x"), &b"v 1 2 3\nf 1 2 3\n"[..]).unwrap();
+        assert!(!s.uses_vt && !s.uses_vn && !s.colors);
+        let s = prescan(Path::new("x"), &b"v 1 2 3 1 0 0\nf 1//1 2//1 3//1\n"[..]).unwrap();
+        assert!(!s.uses_vt && s.uses_vn && s.colors);
+        let s = prescan(Path::new("x"), &b"v 1 2 3 # 4 5 6\nf 1/2 2/2 3/2\n"[..]).unwrap();
+        assert!(s.uses_vt && !s.uses_vn && !s.colors);
+    }
+}

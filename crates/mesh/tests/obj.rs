@@ -1,0 +1,173 @@
+//! OBJ importer tests: both streaming modes, every corner syntax, every error.
+
+mod common;
+
+use common::*;
+use tessera_mesh::{read_mesh, Attributes, MeshError};
+
+#[test]
+fn direct_mode_positions_only() {
+    let text = "# a quad and a triangle
+mtllib x.mtl
+o first
+v 0 0 0
+v 1 0 0
+v 1 1 0
+v 0 1 0
+usemtl red
+s off
+f 1 2 3 4
+g second
+v 0 0 1
+f -5 -4 -1
+l 1 2
+vt 0.5 0.5
+vn 0 0 1
+frobnicate 7
+";
+    let (r, c) = read_ok("d.obj", text.as_bytes());
+    assert_eq!(c.headers[0].attributes, Attributes::default());
+    assert_eq!(c.headers[0].vertex_count, None);
+    assert_eq!(c.triangles, vec![[0, 1, 2], [0, 2, 3], [0, 1, 4]]);
+    assert_eq!(pos(&c)[4], [0.0, 0.0, 1.0]);
+    assert_eq!(r.vertices, 5);
+    assert_eq!(r.triangles, 3);
+    assert_eq!(r.polygons_triangulated, 1);
+    assert_eq!(r.ignored_statements, 1, "only 'frobnicate' is unknown");
+}
+
+#[test]
+fn vertex_colours() {
+    let text = "v 0 0 0 1 0 0\nv 1 0 0 0 0.5 0\nv 0 1 0 0 0 1\nf 1 2 3\n";
+    let (_, c) = read_ok("col.obj", text.as_bytes());
+    assert!(c.headers[0].attributes.colors);
+    assert_eq!(c.vertices[0].color, [255, 0, 0, 255]);
+    assert_eq!(c.vertices[1].color, [0, 128, 0, 255]);
+}
+
+#[test]
+fn combined_mode_with_uvs_and_normals() {
+    let text = "v 0 0 0
+v 1 0 0
+v 0 1 0
+vt 0 0
+vt 1 0
+vt 0 1
+vn 0 0 1
+vn 0 0 -1
+f 1/1/1 2/2/1 3/3/1
+f 3/3/2 2/2/2 1/1/2
+f 1/1/1 2/2/1 3/3/1
+";
+    let (r, c) = read_ok("vtn.obj", text.as_bytes());
+    assert_eq!(c.headers[0].attributes, Attributes { normals: true, colors: false, uvs: true });
+    assert_eq!(r.vertices, 6, "two normals per position");
+    assert_eq!(c.triangles, vec![[0, 1, 2], [3, 4, 5], [0, 1, 2]]);
+    assert_eq!(c.vertices[1].uv, [1.0, 0.0]);
+    assert_eq!(c.vertices[3].normal, [0.0, 0.0, -1.0]);
+    assert_eq!(c.vertices[3].position, [0.0, 1.0, 0.0]);
+}
+
+#[test]
+fn all_corner_syntaxes_and_relative_indices() {
+    let text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nvt 0.25 0.75\nvn 1 0 0\n\
+                f 1//1 2//1 3//1\nf 2/1 4/1 3/1\nf -3/-1/-1 -2 -1\n";
+    let (r, c) = read_ok("syn.obj", text.as_bytes());
+    assert_eq!(c.headers[0].attributes, Attributes { normals: true, colors: false, uvs: true });
+    assert_eq!(r.triangles, 3);
+    // v//vn corners get uv 0, v/vt corners normal 0.
+    assert_eq!(c.vertices[0].uv, [0.0, 0.0]);
+    assert_eq!(c.vertices[0].normal, [1.0, 0.0, 0.0]);
+    assert_eq!(c.vertices[3].uv, [0.25, 0.75]);
+    assert_eq!(c.vertices[3].normal, [0.0; 3]);
+    let last = c.triangles[2];
+    assert_eq!(c.vertices[last[0] as usize].position, [1.0, 0.0, 0.0]);
+    assert_eq!(c.vertices[last[2] as usize].position, [1.0, 1.0, 0.0]);
+}
+
+#[test]
+fn several_objects_share_global_indices() {
+    let text = "o a\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\no b\nv 5 0 0\nv 6 0 0\nv 5 1 0\nf 4 5 6\nf -3 -2 -1\n";
+    let (r, c) = read_ok("multi.obj", text.as_bytes());
+    assert_eq!(c.triangles, vec![[0, 1, 2], [3, 4, 5], [3, 4, 5]]);
+    assert_eq!(r.vertices, 6);
+}
+
+#[test]
+fn degenerate_short_crlf_continuation_and_comments() {
+    let text = "v 0 0 0\r\nv 1 0 0 # trailing comment\r\nv 0 1 0\r\nf 1 2 \\\r\n 3\r\nf 1 1 2\r\nf 1 2\r\n";
+    let (r, c) = read_ok("misc.obj", text.as_bytes());
+    assert_eq!(c.triangles, vec![[0, 1, 2]]);
+    assert_eq!(r.degenerate_faces_skipped, 1);
+    assert_eq!(r.short_faces_skipped, 1);
+}
+
+#[test]
+fn index_errors_name_the_line() {
+    let e = read_err("oor.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n");
+    assert!(matches!(e, MeshError::IndexOutOfRange { index: 4, vertex_count: 3, .. }), "{e}");
+    assert!(e.to_string().contains("line 4"), "{e}");
+    let e = read_err("zero.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n");
+    assert!(matches!(e, MeshError::IndexOutOfRange { index: 0, .. }), "{e}");
+    let e = read_err("neg.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf -4 1 2\n");
+    assert!(matches!(e, MeshError::IndexOutOfRange { index: -4, .. }), "{e}");
+    // Faces may only reference vertices defined before them.
+    let e = read_err("fwd.obj", b"v 0 0 0\nv 1 0 0\nf 1 2 3\nv 0 1 0\n");
+    assert!(matches!(e, MeshError::IndexOutOfRange { index: 3, .. }), "{e}");
+    let e = read_err("vt.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/1 2/2 3/1\n");
+    assert!(e.to_string().contains("texture coordinate index 2"), "{e}");
+    assert!(e.to_string().contains("line 5"), "{e}");
+}
+
+#[test]
+fn malformed_lines() {
+    let e = read_err("num.obj", b"v 0 0 0\nv 1 zero 0\n");
+    assert!(matches!(e, MeshError::Malformed { .. }), "{e}");
+    assert!(e.to_string().contains("line 2"), "{e}");
+    let e = read_err("short.obj", b"v 0 0\n");
+    assert!(e.to_string().contains("at least 3"), "{e}");
+    let e = read_err("corner.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3/4/5/6\n");
+    assert!(e.to_string().contains("bad face corner"), "{e}");
+    let e = read_err("word.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 x\n");
+    assert!(e.to_string().contains("bad vertex index 'x'"), "{e}");
+}
+
+#[test]
+fn nan_and_empty() {
+    let e = read_err("nan.obj", b"v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n");
+    assert!(matches!(e, MeshError::NonFinite { vertex: 1, .. }), "{e}");
+    let e = read_err("inf.obj", b"v 0 0 0\nv 1 0 0\nv 0 inf 0\nf 1 2 3\n");
+    assert!(matches!(e, MeshError::NonFinite { vertex: 2, .. }), "{e}");
+    let e = read_err("empty.obj", b"# nothing\nv 0 0 0\n");
+    assert!(matches!(e, MeshError::Empty { .. }), "{e}");
+    let e = read_err("zero-bytes.obj", b"");
+    assert!(matches!(e, MeshError::Empty { .. }), "{e}");
+}
+
+#[test]
+fn unreadable_obj() {
+    let mut c = Collect::default();
+    let e = read_mesh(std::path::Path::new("/nonexistent/m.obj"), &mut c).unwrap_err();
+    assert!(matches!(e, MeshError::Io { .. }), "{e}");
+}
+
+fn check_real(name: &str, triangles: u64) {
+    let Some(path) = shared_data(name) else {
+        return;
+    };
+    let mut c = Collect::default();
+    let r = read_mesh(&path, &mut c).unwrap();
+    eprintln!("{name}: {r:?} {:?}", c.headers[0]);
+    assert_eq!(r.triangles, triangles);
+    assert_eq!(r.vertices as usize, c.vertices.len());
+}
+
+#[test]
+fn real_bunny_obj() {
+    check_real("bunny.obj", 69_451);
+}
+
+#[test]
+fn real_nefertiti_obj() {
+    check_real("nefertiti.obj", 99_938);
+}
