@@ -7,7 +7,8 @@
 use crate::bounds::Sphere;
 use crate::patch::{WorkPatch, WorkVertex, Welder};
 use std::cmp::Reverse;
-use std::collections::{BinaryHeap, HashMap};
+use rustc_hash::FxHashMap;
+use std::collections::BinaryHeap;
 
 /// Tuning of the simplifier.
 #[derive(Clone, Copy, Debug)]
@@ -50,7 +51,7 @@ pub fn merge(children: &[&WorkPatch]) -> Merged {
 /// attribute seams do not count as borders. Those edges are the diamond's outer border
 /// (shared with patches of other diamonds) and the model's own open boundary.
 pub fn border_locks(vertices: &[WorkVertex], indices: &[u32]) -> Vec<bool> {
-    let mut pos_id: HashMap<[u32; 3], u32> = HashMap::with_capacity(vertices.len());
+    let mut pos_id: FxHashMap<[u32; 3], u32> = FxHashMap::with_capacity_and_hasher(vertices.len(), Default::default());
     let pid: Vec<u32> = vertices
         .iter()
         .map(|v| {
@@ -58,7 +59,7 @@ pub fn border_locks(vertices: &[WorkVertex], indices: &[u32]) -> Vec<bool> {
             *pos_id.entry(v.q).or_insert(n)
         })
         .collect();
-    let mut edges: HashMap<(u32, u32), u32> = HashMap::with_capacity(indices.len());
+    let mut edges: FxHashMap<(u32, u32), u32> = FxHashMap::with_capacity_and_hasher(indices.len(), Default::default());
     for t in indices.chunks_exact(3) {
         for k in 0..3 {
             let (a, b) = (pid[t[k] as usize], pid[t[(k + 1) % 3] as usize]);
@@ -175,8 +176,8 @@ pub fn morph_destinations(m: &Merged, simplified: &[u32]) -> Vec<u32> {
 
 /// Split simplified triangles among the diamond's tetrahedra: `owner(centroid)` says
 /// which (index into the diamond's list). Each part gets compact vertices.
-pub fn split(m: &Merged, simplified: &[u32], parts: usize, owner: impl Fn([[u32; 3]; 3]) -> usize) -> Vec<WorkPatch> {
-    let mut remaps: Vec<HashMap<u32, u32>> = vec![HashMap::new(); parts];
+pub fn split(m: &Merged, simplified: &[u32], parts: usize, mut owner: impl FnMut([[u32; 3]; 3]) -> usize) -> Vec<WorkPatch> {
+    let mut remaps: Vec<FxHashMap<u32, u32>> = vec![FxHashMap::default(); parts];
     let mut out: Vec<WorkPatch> = vec![WorkPatch::default(); parts];
     for t in simplified.chunks_exact(3) {
         let q = [t[0], t[1], t[2]].map(|i| m.vertices[i as usize].q);

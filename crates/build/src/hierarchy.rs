@@ -13,7 +13,8 @@ use crate::partition::{parent_id, read_leaf_faces, tet_id, Leaf, Partition, TetI
 use crate::patch::{remove_bad_triangles, WorkPatch, WorkVertex, Welder};
 use crate::{BuildError, BuildOptions, BuildReport, Progress};
 use rayon::prelude::*;
-use std::collections::{HashMap, HashSet};
+use rustc_hash::FxHashMap;
+use std::collections::HashSet;
 use std::fs::File;
 use std::path::Path;
 use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
@@ -22,7 +23,7 @@ use tessera_format::{
     encode_patch, write_model, Header, NodeRecord, PatchData, PatchSpool, SpooledPatch, ATTR_COLORS, ATTR_NORMALS,
     ATTR_UVS, NODE_FLAG_LEAF, NO_NODE,
 };
-use tessera_tetra::{DiamondKey, Tet};
+use tessera_tetra::{DiamondKey, Locator, Tet};
 
 /// Everything known about a node before the table is written.
 #[derive(Clone, Debug)]
@@ -48,11 +49,11 @@ struct Ctx<'a> {
     imp: &'a Imported,
     part: &'a Partition,
     buckets: File,
-    leaf_of: HashMap<TetId, &'a Leaf>,
+    leaf_of: FxHashMap<TetId, &'a Leaf>,
     internal: HashSet<TetId>,
     work: PatchSpool,
     out: PatchSpool,
-    nodes: Mutex<HashMap<TetId, NodeInfo>>,
+    nodes: Mutex<FxHashMap<TetId, NodeInfo>>,
     diamond_ids: AtomicU32,
     degenerate: AtomicU64,
     duplicate: AtomicU64,
@@ -60,6 +61,10 @@ struct Ctx<'a> {
     cfg: SimplifyConfig,
     step: f64,
 }
+
+/// Below this many triangles a patch is not halved further: tiny patches cost more in
+/// per-node overhead (draw calls, records) than they save.
+const MIN_PATCH_TRIANGLES: usize = 256;
 
 fn stored(s: &Sphere, scale: f64) -> Sphere {
     Sphere::from_f32(s.to_f32(scale))
@@ -78,7 +83,7 @@ impl Ctx<'_> {
     /// A leaf's patch from its bucket: weld, clean, optimise.
     fn load_leaf(&self, leaf: &Leaf) -> Result<WorkPatch, BuildError> {
         let faces = read_leaf_faces(&self.buckets, &self.part.buckets, leaf)?;
-        let mut local: HashMap<u32, u32> = HashMap::with_capacity(faces.len());
+        let mut local: FxHashMap<u32, u32> = FxHashMap::with_capacity_and_hasher(faces.len(), Default::default());
         let mut w = Welder::with_capacity(faces.len());
         let mut indices = Vec::with_capacity(faces.len() * 3);
         for f in &faces {
@@ -177,7 +182,12 @@ impl Ctx<'_> {
         let refs: Vec<&WorkPatch> = kids.iter().map(|k| &k.1).collect();
         let merged = diamond::merge(&refs);
         let locks = diamond::border_locks(&merged.vertices, &merged.indices);
-        let target: usize = per_tet_tris.iter().map(|&n| n.min(self.cfg.node_triangles)).sum();
+        // Each parent holds at most `node_triangles` (ATP) and at most half of what its
+        // children hold. A surface crosses ~1.59x more tetrahedra per level down (4x per
+        // 3 levels), not 2x, so without the halving a constant patch size would shrink
+        // the triangle count by only 1.59x per level and the model would store ~2.7x its
+        // input; halving bounds it by 2x.
+        let target: usize = per_tet_tris.iter().map(|&n| (n / 2).max(n.min(MIN_PATCH_TRIANGLES)).min(self.cfg.node_triangles)).sum();
         let (simplified, err_grid) = diamond::simplify(&merged, &locks, target, &self.cfg);
         // 3. Morph destinations; the children are now complete and can be written.
         let dest = diamond::morph_destinations(&merged, &simplified);
@@ -195,10 +205,12 @@ impl Ctx<'_> {
         let level = tets[0].level;
         let grid = self.part.grid;
         let centroids: Vec<[i64; 3]> = tets.iter().map(|t| t.centroid4()).collect();
+        let keys: Vec<u64> = tets.iter().map(|t| t.dfs_key()).collect();
+        let mut loc = Locator::new(level, 3);
         let owner = |q: [[u32; 3]; 3]| -> usize {
             let c = grid.centroid3(q);
-            if let Some(t) = Tet::locate_scaled(c, 3, level) {
-                if let Some(i) = tets.iter().position(|m| m.root == t.root && m.path == t.path) {
+            if let Some(k) = loc.locate(c) {
+                if let Some(i) = keys.iter().position(|&m| m == k) {
                     return i;
                 }
             }
@@ -271,11 +283,11 @@ pub(crate) fn build_hierarchy(
             id = parent_id(p);
         }
     }
-    let mut by_level: Vec<HashMap<DiamondKey, Vec<Tet>>> = Vec::new();
+    let mut by_level: Vec<FxHashMap<DiamondKey, Vec<Tet>>> = Vec::new();
     for &(r, l, p) in &internal {
         let t = Tet::from_path(r, l, p).ok_or_else(|| BuildError::Internal("bad tetrahedron".into()))?;
         if by_level.len() <= l as usize {
-            by_level.resize_with(l as usize + 1, HashMap::new);
+            by_level.resize_with(l as usize + 1, FxHashMap::default);
         }
         by_level[l as usize].entry(t.diamond()).or_default().push(t);
     }
@@ -290,7 +302,7 @@ pub(crate) fn build_hierarchy(
         internal,
         work: PatchSpool::new(tmp)?,
         out: PatchSpool::new(tmp)?,
-        nodes: Mutex::new(HashMap::new()),
+        nodes: Mutex::new(FxHashMap::default()),
         diamond_ids: AtomicU32::new(0),
         degenerate: AtomicU64::new(0),
         duplicate: AtomicU64::new(0),
@@ -349,7 +361,7 @@ fn finalize(ctx: &Ctx, output: &Path, opts: &BuildOptions, progress: &dyn Progre
         })
         .collect();
     infos.sort_by_key(|(m, n)| (n.id.1, *m, n.id.0, n.id.2));
-    let index: HashMap<TetId, u32> = infos.iter().enumerate().map(|(i, (_, n))| (n.id, i as u32)).collect();
+    let index: FxHashMap<TetId, u32> = infos.iter().enumerate().map(|(i, (_, n))| (n.id, i as u32)).collect();
     let grid = ctx.part.grid;
     let mut records = Vec::with_capacity(infos.len());
     let mut patches = Vec::with_capacity(infos.len());
@@ -407,6 +419,8 @@ fn finalize(ctx: &Ctx, output: &Path, opts: &BuildOptions, progress: &dyn Progre
     report.nodes = records.len() as u64;
     report.levels = levels;
     report.max_error = max_error as f64;
+    report.quant_bits = grid.bits;
+    report.mean_edge = ctx.part.mean_edge;
     report.quant_step = grid.step();
     report.quant_error_max = grid.step() * 3f64.sqrt() / 2.0;
     report.output_bytes = std::fs::metadata(output).map_err(|e| BuildError::io(output, e))?.len();

@@ -35,9 +35,12 @@ pub struct BuildOptions {
     pub memory_bytes: u64,
     /// Worker threads; `None` = all cores.
     pub threads: Option<usize>,
-    /// Quantisation: `2^quant_bits` grid cells along the bounding cube's edge (default
-    /// 16; at most 21). The largest position error is `sqrt(3)/2` cells.
-    pub quant_bits: u32,
+    /// Quantisation: `2^quant_bits` grid cells along the bounding cube's edge (at most
+    /// 21). The largest position error is `sqrt(3)/2` cells. `None` (the default) picks
+    /// the bits from the input's sampling density: a cell of at most 1/16 of the mean
+    /// edge length, so the position error stays under ~5% of an edge whatever the size of
+    /// the model, and no bits are spent below that.
+    pub quant_bits: Option<u32>,
     /// Most triangles in a leaf (ATP: 4000).
     pub leaf_triangles: u32,
     /// Target triangles per internal node (ATP: 2000).
@@ -51,7 +54,7 @@ impl Default for BuildOptions {
         BuildOptions {
             memory_bytes: 1 << 30,
             threads: None,
-            quant_bits: 16,
+            quant_bits: None,
             leaf_triangles: 4000,
             node_triangles: 2000,
             tmp_dir: None,
@@ -115,6 +118,10 @@ pub struct BuildReport {
     pub degenerate_triangles_removed: u64,
     pub duplicate_triangles_removed: u64,
     pub oversized_leaves: u64,
+    /// Bits of the quantisation grid (chosen or given).
+    pub quant_bits: u32,
+    /// Mean input edge length (model units), estimated from a sample of triangles.
+    pub mean_edge: f64,
     /// Model units per grid step.
     pub quant_step: f64,
     /// Largest distance between an input vertex and its stored position.
@@ -137,8 +144,10 @@ impl BuildReport {
 /// Build `output` from the mesh at `input`. Writes atomically: on any error nothing is
 /// left at `output` (a file already there stays as it was).
 pub fn build(input: &Path, output: &Path, opts: &BuildOptions, progress: &dyn Progress) -> Result<BuildReport, BuildError> {
-    if !(1..=21).contains(&opts.quant_bits) {
-        return Err(BuildError::Options(format!("quantization bits must be 1..=21, got {}", opts.quant_bits)));
+    if let Some(bits) = opts.quant_bits {
+        if !(1..=21).contains(&bits) {
+            return Err(BuildError::Options(format!("quantization bits must be 1..=21, got {bits}")));
+        }
     }
     if opts.leaf_triangles < 16 || opts.node_triangles < 8 || opts.node_triangles > opts.leaf_triangles {
         return Err(BuildError::Options("need leaf_triangles >= 16 and 8 <= node_triangles <= leaf_triangles".into()));

@@ -18,7 +18,7 @@ use std::fs::File;
 use std::io::{BufReader, BufWriter, Read, Write};
 use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
-use tessera_tetra::{dfs_key, dfs_range, Tet, CUBE_BITS, MAX_LEVEL};
+use tessera_tetra::{dfs_key, dfs_range, Locator, Tet, CUBE_BITS, MAX_LEVEL};
 
 /// The global quantisation grid: `2^bits` cells along each edge of the bounding cube.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -92,6 +92,39 @@ pub struct Partition {
     pub oversized_leaves: u64,
     /// Depth of the keys (deepest possible leaf).
     pub key_depth: u8,
+    /// Estimated mean edge length of the input (model units).
+    pub mean_edge: f64,
+}
+
+/// Grid bits for a cell of at most 1/16 of the mean edge length (see
+/// `BuildOptions::quant_bits`), between 8 and 21.
+pub fn auto_quant_bits(cube_size: f64, mean_edge: f64) -> u32 {
+    if !(mean_edge > 0.0 && mean_edge.is_finite()) {
+        return 16;
+    }
+    ((cube_size * 16.0 / mean_edge).log2().ceil() as i64).clamp(8, 21) as u32
+}
+
+/// Mean edge length over an evenly spread sample of at most 65536 triangles.
+fn mean_edge_length(imp: &Imported) -> Result<f64, BuildError> {
+    const SAMPLES: u64 = 1 << 16;
+    let fp = &imp.faces_path;
+    let file = File::open(fp).map_err(|e| BuildError::io(fp, e))?;
+    let stride = (imp.face_count / SAMPLES).max(1);
+    let (mut sum, mut n) = (0.0f64, 0u64);
+    let mut f = 0u64;
+    while f < imp.face_count {
+        let mut b = [0u8; 12];
+        file.read_exact_at(&mut b, f * 12).map_err(|e| BuildError::io(fp, e))?;
+        let t: [u32; 3] = bytemuck::cast(b);
+        let p = t.map(|i| imp.vertices.get(i).position.map(|c| c as f64));
+        for k in 0..3 {
+            sum += crate::bounds::dist2(p[k], p[(k + 1) % 3]).sqrt();
+        }
+        n += 3;
+        f += stride;
+    }
+    Ok(if n > 0 { sum / n as f64 } else { 0.0 })
 }
 
 /// Faces processed per chunk; bounded memory whatever the input size.
@@ -106,18 +139,36 @@ fn read_chunk<T: bytemuck::Pod>(r: &mut impl Read, n: usize, path: &Path) -> Res
 }
 
 pub fn partition(imp: &Imported, tmp: &Path, opts: &BuildOptions, progress: &dyn Progress) -> Result<Partition, BuildError> {
-    let grid = Grid::new(imp.bounds.min, imp.bounds.max, opts.quant_bits);
-    // Deeper keys cost time on every triangle; 3 levels per octree level, and no point
-    // going finer than the quantisation grid.
-    let key_depth = (3 * opts.quant_bits).min(45).min(MAX_LEVEL as u32) as u8;
+    let size = Grid::new(imp.bounds.min, imp.bounds.max, 1).size;
+    let mean_edge = mean_edge_length(imp)?;
+    let bits = opts.quant_bits.unwrap_or_else(|| auto_quant_bits(size, mean_edge));
+    let grid = Grid::new(imp.bounds.min, imp.bounds.max, bits);
+    let key_depth = key_depth(imp.face_count, grid.bits, opts);
     let keys_path = tmp.join("keys.bin");
+    let t = std::time::Instant::now();
     write_keys(imp, &grid, key_depth, &keys_path, opts, progress)?;
+    tracing::info!(seconds = t.elapsed().as_secs_f64(), "partition: keys");
+    let t = std::time::Instant::now();
     let split = choose_splits(&keys_path, imp.face_count, key_depth, opts, progress)?;
+    tracing::info!(seconds = t.elapsed().as_secs_f64(), splits = split.len(), "partition: counts and closure");
+    let t = std::time::Instant::now();
     let mut leaves = leaves_of(&split);
     let buckets = tmp.join("buckets.bin");
     let oversized = route(imp, &keys_path, &mut leaves, &buckets, opts, progress)?;
+    tracing::info!(seconds = t.elapsed().as_secs_f64(), leaves = leaves.len(), "partition: routing");
     let _ = std::fs::remove_file(&keys_path);
-    Ok(Partition { grid, split, leaves, buckets, oversized_leaves: oversized, key_depth })
+    Ok(Partition { grid, split, leaves, buckets, oversized_leaves: oversized, key_depth, mean_edge })
+}
+
+/// How deep to key triangles. Leaves of a surface sit near depth `1.5 log2(N / cap)`
+/// (a surface crosses ~4^j of the 8^j cubes of octree level j, and 3 tetrahedron levels
+/// make one octree level); 12 more levels resolve density contrasts of ~250x at full
+/// leaf size. Never deeper than the quantisation grid or 36 levels (4096 cells per cube
+/// edge), since every level costs time on every triangle.
+fn key_depth(faces: u64, bits: u32, opts: &BuildOptions) -> u8 {
+    let leaves = (faces as f64 / opts.leaf_triangles as f64).max(1.0);
+    let d = (1.5 * leaves.log2()).round() as u32 + 12;
+    d.clamp(24, 36).min(3 * bits).min(MAX_LEVEL as u32) as u8
 }
 
 /// Pass 1: one depth-first key per face.
@@ -131,12 +182,19 @@ fn write_keys(imp: &Imported, grid: &Grid, depth: u8, out: &Path, opts: &BuildOp
     while done < imp.face_count {
         let n = ((imp.face_count - done) as usize).min(chunk);
         let f: Vec<[u32; 3]> = read_chunk(&mut faces, n, fp)?;
+        // Consecutive faces of a mesh file are usually close in space: each worker keeps
+        // its last root-to-leaf chain and re-descends only where the new centroid leaves it.
         let k: Vec<u64> = f
-            .par_iter()
-            .map(|t| {
-                let q = t.map(|i| grid.quantize(imp.vertices.get(i).position));
-                let c = grid.centroid3(q);
-                Tet::locate_scaled(c, 3, depth).map(|t| t.dfs_key()).unwrap_or(0)
+            .par_chunks(4096)
+            .flat_map_iter(|faces| {
+                let mut loc = Locator::new(depth, 3);
+                faces
+                    .iter()
+                    .map(move |t| {
+                        let q = t.map(|i| grid.quantize(imp.vertices.get(i).position));
+                        loc.locate(grid.centroid3(q)).unwrap_or(0)
+                    })
+                    .collect::<Vec<_>>()
             })
             .collect();
         keys.write_all(bytemuck::cast_slice(&k)).map_err(|e| BuildError::io(out, e))?;

@@ -4,7 +4,7 @@
 
 use crate::bounds::{normal_cone, Sphere};
 use bytemuck::{Pod, Zeroable};
-use std::collections::HashMap;
+use rustc_hash::{FxHashMap, FxHashSet};
 
 /// One vertex as the builder sees it. Two vertices are the same vertex exactly when their
 /// bytes are equal, which is how patches are welded across tetrahedra.
@@ -112,13 +112,13 @@ pub fn face_normal(a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> [f64; 3] {
 /// input vertex went.
 #[derive(Default)]
 pub struct Welder {
-    map: HashMap<VertexKey, u32>,
+    map: FxHashMap<VertexKey, u32>,
     pub vertices: Vec<WorkVertex>,
 }
 
 impl Welder {
     pub fn with_capacity(n: usize) -> Welder {
-        Welder { map: HashMap::with_capacity(n), vertices: Vec::with_capacity(n) }
+        Welder { map: FxHashMap::with_capacity_and_hasher(n, Default::default()), vertices: Vec::with_capacity(n) }
     }
 
     /// Index of `v` in the welded mesh (added if new).
@@ -143,7 +143,7 @@ pub struct CleanupCounts {
 /// orientation); keeps first occurrences in order.
 pub fn remove_bad_triangles(indices: &mut Vec<u32>) -> CleanupCounts {
     let mut counts = CleanupCounts::default();
-    let mut seen = std::collections::HashSet::with_capacity(indices.len() / 3);
+    let mut seen = FxHashSet::with_capacity_and_hasher(indices.len() / 3, Default::default());
     let mut out = Vec::with_capacity(indices.len());
     for t in indices.chunks_exact(3) {
         if t[0] == t[1] || t[1] == t[2] || t[0] == t[2] {

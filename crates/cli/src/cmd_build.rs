@@ -20,9 +20,10 @@ pub struct Args {
     /// Worker threads (default: all cores).
     #[arg(long)]
     threads: Option<usize>,
-    /// Quantization: 2^bits grid cells along the bounding cube's edge (1..=21).
-    #[arg(long, default_value_t = 16)]
-    quant_bits: u32,
+    /// Quantization: 2^bits grid cells along the bounding cube's edge (1..=21). Default:
+    /// chosen from the input's density (a cell of at most 1/16 of the mean edge length).
+    #[arg(long)]
+    quant_bits: Option<u32>,
     /// Most triangles per leaf.
     #[arg(long, default_value_t = 4000)]
     leaf_triangles: u32,
@@ -72,7 +73,7 @@ pub fn report_json(r: &BuildReport) -> serde_json::Value {
         "bytes_per_input_triangle": r.bytes_per_input_triangle(),
         "seconds": r.seconds,
         "input_triangles_per_second": r.triangles_per_second(),
-        "quantization": { "step": r.quant_step, "max_error": r.quant_error_max },
+        "quantization": { "bits": r.quant_bits, "step": r.quant_step, "max_error": r.quant_error_max, "mean_edge": r.mean_edge },
         "max_error": r.max_error,
         "stages": r.stage_seconds.iter().map(|(n, s)| json!({"stage": n, "seconds": s})).collect::<Vec<_>>(),
         "warnings": {
@@ -92,7 +93,10 @@ fn print_report(out: &std::path::Path, r: &BuildReport) {
     println!("  input        {} triangles, {} vertices{}", r.input_triangles, r.input_vertices, if r.normals_computed { " (normals computed)" } else { "" });
     println!("  hierarchy    {} nodes ({} leaves), {} levels, {} triangles stored", r.nodes, r.leaves, r.levels, r.stored_triangles);
     println!("  output       {} bytes, {:.2} bytes/input triangle", r.output_bytes, r.bytes_per_input_triangle());
-    println!("  quantization step {:.3e}, max error {:.3e} (model units)", r.quant_step, r.quant_error_max);
+    println!(
+        "  quantization {} bits, step {:.3e}, max error {:.3e} (model units; mean edge {:.3e})",
+        r.quant_bits, r.quant_step, r.quant_error_max, r.mean_edge
+    );
     println!("  coarsest error {:.4e} (model units)", r.max_error);
     println!("  time         {:.2} s, {:.0} input triangles/s", r.seconds, r.triangles_per_second());
     for (n, s) in &r.stage_seconds {

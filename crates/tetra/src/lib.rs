@@ -51,6 +51,108 @@ pub struct Tet {
     pub path: u64,
 }
 
+/// The bisection plane of a tetrahedron. The splitting planes of this hierarchy are all
+/// of the form `x_i = c` or `x_i +- x_j = c`, so with the normal scaled to entries in
+/// {-1, 0, 1} the side test is a few exact integer additions.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SplitPlane {
+    normal: Point,
+    /// Twice the refinement edge midpoint.
+    z2: Point,
+    /// Whether `x0` (which goes to child 0) is on the positive side.
+    x0_positive: bool,
+}
+
+impl SplitPlane {
+    /// Child (0 or 1) holding the point `p` given in lattice units times `scale`; points
+    /// on the plane go to child 0.
+    #[inline]
+    pub fn child_of(&self, p: Point, scale: i64) -> usize {
+        let n = self.normal;
+        let s = n[0] * (2 * p[0] - scale * self.z2[0])
+            + n[1] * (2 * p[1] - scale * self.z2[1])
+            + n[2] * (2 * p[2] - scale * self.z2[2]);
+        if s == 0 || (s > 0) == self.x0_positive {
+            0
+        } else {
+            1
+        }
+    }
+}
+
+/// Point location for streams of nearby points (consecutive triangles of a mesh file):
+/// keeps the last root-to-leaf chain with its split planes and re-descends only below
+/// the first level where the new point leaves it. Gives the same answer as
+/// [`Tet::locate_scaled`], usually after one plane test per level and no bisection.
+pub struct Locator {
+    depth: u8,
+    scale: i64,
+    root: Option<u8>,
+    /// Tetrahedra of the current chain, levels 0..depth, each with its plane.
+    chain: Vec<(Tet, SplitPlane)>,
+    /// Child taken at each level of the chain.
+    taken: Vec<u8>,
+}
+
+impl Locator {
+    /// Locates points given in lattice units times `scale`, down to `depth`.
+    pub fn new(depth: u8, scale: i64) -> Locator {
+        let depth = depth.min(MAX_LEVEL);
+        Locator { depth, scale, root: None, chain: Vec::with_capacity(depth as usize), taken: vec![0; depth as usize] }
+    }
+
+    /// Depth-first key (see [`Tet::dfs_key`]) of the tetrahedron at `depth` holding `p`,
+    /// `None` outside the cube.
+    pub fn locate(&mut self, p: Point) -> Option<u64> {
+        let s = self.scale;
+        if p.iter().any(|&c| c < 0 || c > CUBE * s) {
+            return None;
+        }
+        let r = ROOT_AXES.iter().position(|o| p[o[0]] >= p[o[1]] && p[o[1]] >= p[o[2]])? as u8;
+        let mut from = 0usize;
+        if self.root == Some(r) && self.chain.len() == self.depth as usize {
+            while from < self.chain.len() {
+                let c = self.chain[from].1.child_of(p, s) as u8;
+                if c != self.taken[from] {
+                    break;
+                }
+                from += 1;
+            }
+            if from == self.chain.len() {
+                return Some(self.key(r));
+            }
+        } else {
+            self.root = Some(r);
+            self.chain.clear();
+            let t = Tet::roots()[r as usize];
+            self.chain.push((t, t.split_plane()));
+        }
+        // Re-descend from level `from`.
+        self.chain.truncate(from + 1);
+        for level in from..self.depth as usize {
+            let (t, plane) = self.chain[level];
+            let c = plane.child_of(p, s);
+            self.taken[level] = c as u8;
+            if level + 1 < self.depth as usize {
+                let child = t.children()[c];
+                self.chain.push((child, child.split_plane()));
+            }
+        }
+        if self.depth == 0 {
+            self.chain.clear();
+        }
+        Some(self.key(r))
+    }
+
+    fn key(&self, root: u8) -> u64 {
+        let mut key = (root as u64) << MAX_LEVEL;
+        for (i, &c) in self.taken.iter().enumerate() {
+            key |= (c as u64) << (MAX_LEVEL as usize - 1 - i);
+        }
+        key
+    }
+}
+
 /// Name of a diamond: its level and the doubled midpoint of its refinement edge (doubling
 /// keeps it integral for any pair of lattice points).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -123,10 +225,13 @@ impl Tet {
     }
 
     /// Which child contains point `p` given in lattice coordinates multiplied by `scale`
-    /// (points on the splitting plane go to child 0). Exact: the splitting planes of this
-    /// hierarchy are all of the form `x_i = c` or `x_i +- x_j = c`, so after normalising
-    /// the plane normal to entries in {-1, 0, 1} the test is a few integer additions.
+    /// (points on the splitting plane go to child 0). Exact: see [`SplitPlane`].
     pub fn locate_child_scaled(&self, p: Point, scale: i64) -> usize {
+        self.split_plane().child_of(p, scale)
+    }
+
+    /// The plane that bisects this tetrahedron.
+    pub fn split_plane(&self) -> SplitPlane {
         let k = self.tag as usize;
         let x = &self.v;
         // The splitting plane holds z and the two vertices that are not x0 or xk.
@@ -138,15 +243,15 @@ impl Tet {
         let z2 = add(x[0], x[k]); // 2z, integral
         let a = sub(scale2(x[i], 2), z2);
         let b = sub(scale2(x[j], 2), z2);
-        let n = normalise(cross(a, b));
-        // Side of x0 and of p, both relative to z, in units where z is integral after *2.
-        let side0 = dot(n, sub(scale2(x[0], 2), z2));
-        let sidep = dot(n, sub(scale2(p, 2), scale2(z2, scale)));
-        if (side0 > 0) == (sidep > 0) || sidep == 0 {
-            0
-        } else {
-            1
-        }
+        // |a|, |b| < 2^24, so the cross product fits an i64.
+        let normal = [
+            (a[1] * b[2] - a[2] * b[1]).signum(),
+            (a[2] * b[0] - a[0] * b[2]).signum(),
+            (a[0] * b[1] - a[1] * b[0]).signum(),
+        ];
+        debug_assert_eq!(normal, normalise(cross(a, b)));
+        let x0_positive = dot(normal, sub(scale2(x[0], 2), z2)) > 0;
+        SplitPlane { normal, z2, x0_positive }
     }
 
     /// Descendant at `level` containing the scaled point (see [`Tet::locate_child_scaled`]).
@@ -295,12 +400,17 @@ fn cross(a: Point, b: Point) -> [i128; 3] {
     let (a, b) = (a.map(|x| x as i128), b.map(|x| x as i128));
     [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 }
-/// Divide a plane normal by the magnitude of its largest entry. For this hierarchy every
-/// non-zero entry has that magnitude, so the result is in {-1, 0, 1}^3.
+/// Scale a plane normal to entries in {-1, 0, 1}: for this hierarchy every non-zero
+/// entry has the same magnitude, so the signs are the normal.
 fn normalise(n: [i128; 3]) -> Point {
-    let m = n.iter().map(|x| x.abs()).max().unwrap_or(1).max(1);
-    debug_assert!(n.iter().all(|x| *x == 0 || x.abs() == m), "unexpected plane {n:?}");
-    [(n[0] / m) as i64, (n[1] / m) as i64, (n[2] / m) as i64]
+    debug_assert!(
+        {
+            let m = n.iter().map(|x| x.abs()).max().unwrap_or(0);
+            n.iter().all(|x| *x == 0 || x.abs() == m)
+        },
+        "unexpected plane {n:?}"
+    );
+    [n[0].signum() as i64, n[1].signum() as i64, n[2].signum() as i64]
 }
 fn dot(a: Point, b: Point) -> i64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]

@@ -158,6 +158,19 @@ proptest! {
     }
 
     #[test]
+    fn locator_agrees_with_locate(pts in prop::collection::vec((0..CUBE, 0..CUBE, 0..CUBE), 1..40), depth in 0u8..40, jitter in 0i64..5000) {
+        // Why: the partition keys every triangle with the incremental locator; it must give
+        // exactly the tetrahedron the plain descent gives, for near and far jumps alike.
+        let mut loc = Locator::new(depth, 3);
+        for (i, &(x, y, z)) in pts.iter().enumerate() {
+            for p in [[3 * x, 3 * y, 3 * z], [3 * x + (i as i64 % 3) * jitter % 7, 3 * y + 1, (3 * z - 2).max(0)]] {
+                let expect = Tet::locate_scaled(p, 3, depth).map(|t| t.dfs_key());
+                prop_assert_eq!(loc.locate(p), expect);
+            }
+        }
+    }
+
+    #[test]
     fn scaled_location_agrees(x in 0..CUBE, y in 0..CUBE, z in 0..CUBE, level in 0u8..30) {
         let a = Tet::locate_scaled([x, y, z], 1, level).unwrap();
         let b = Tet::locate_scaled([3 * x, 3 * y, 3 * z], 3, level).unwrap();
