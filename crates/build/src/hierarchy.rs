@@ -62,9 +62,25 @@ struct Ctx<'a> {
     step: f64,
 }
 
-/// Below this many triangles a patch is not halved further: tiny patches cost more in
+/// Below this many triangles a patch is not reduced further: tiny patches cost more in
 /// per-node overhead (draw calls, records) than they save.
 const MIN_PATCH_TRIANGLES: usize = 256;
+
+/// How much fewer triangles a parent holds than its children together.
+///
+/// ATP fills leaves to ~4000 and parents to ~2000, so the first level up already divides
+/// by ~4. A surface, though, crosses only ~1.59x more tetrahedra per level down (4x per
+/// 3 levels, not 8x), so leaves fill to ~1400-2000 triangles on average, and with a
+/// constant patch size each level would hold 1/1.59 of the one below: ~2.7x the input
+/// stored in all. Dividing by 3 per level bounds the whole hierarchy near 1.5x the input
+/// (patches shrink towards [`MIN_PATCH_TRIANGLES`] at the coarse levels, where there are
+/// few of them), which is what keeps the file near 6 bytes per input triangle.
+const LEVEL_REDUCTION: usize = 3;
+
+/// Triangles a parent tetrahedron keeps when its children hold `children`.
+fn parent_target(children: usize, node_triangles: usize) -> usize {
+    (children / LEVEL_REDUCTION).max(children.min(MIN_PATCH_TRIANGLES)).min(node_triangles)
+}
 
 fn stored(s: &Sphere, scale: f64) -> Sphere {
     Sphere::from_f32(s.to_f32(scale))
@@ -182,12 +198,7 @@ impl Ctx<'_> {
         let refs: Vec<&WorkPatch> = kids.iter().map(|k| &k.1).collect();
         let merged = diamond::merge(&refs);
         let locks = diamond::border_locks(&merged.vertices, &merged.indices);
-        // Each parent holds at most `node_triangles` (ATP) and at most half of what its
-        // children hold. A surface crosses ~1.59x more tetrahedra per level down (4x per
-        // 3 levels), not 2x, so without the halving a constant patch size would shrink
-        // the triangle count by only 1.59x per level and the model would store ~2.7x its
-        // input; halving bounds it by 2x.
-        let target: usize = per_tet_tris.iter().map(|&n| (n / 2).max(n.min(MIN_PATCH_TRIANGLES)).min(self.cfg.node_triangles)).sum();
+        let target: usize = per_tet_tris.iter().map(|&n| parent_target(n, self.cfg.node_triangles)).sum();
         let (simplified, err_grid) = diamond::simplify(&merged, &locks, target, &self.cfg);
         // 3. Morph destinations; the children are now complete and can be written.
         let dest = diamond::morph_destinations(&merged, &simplified);
