@@ -41,15 +41,33 @@ impl Sphere {
         Sphere { center, radius: r2.sqrt() }
     }
 
-    /// A sphere that contains every ball in `balls` (incremental growth).
+    /// A sphere that contains every ball in `balls`: the smaller of two enclosing balls,
+    /// one centred on the bounding box of the balls, one grown ball by ball. (Growth
+    /// alone depends on the order and can be 3x too large; the box centre alone is poor
+    /// for elongated sets.)
     pub fn of_balls(balls: &[Sphere]) -> Sphere {
         let mut it = balls.iter();
         let Some(first) = it.next() else { return Sphere::default() };
-        let mut s = *first;
+        let mut grown = *first;
         for b in it {
-            s = s.grow_to(b);
+            grown = grown.grow_to(b);
         }
-        s
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        for b in balls {
+            for i in 0..3 {
+                lo[i] = lo[i].min(b.center[i] - b.radius);
+                hi[i] = hi[i].max(b.center[i] + b.radius);
+            }
+        }
+        let center = std::array::from_fn(|i| (lo[i] + hi[i]) * 0.5);
+        let radius = balls.iter().map(|b| dist2(b.center, center).sqrt() + b.radius).fold(0.0, f64::max);
+        let boxed = Sphere { center, radius };
+        if boxed.radius < grown.radius {
+            boxed
+        } else {
+            grown
+        }
     }
 
     /// The smallest sphere containing `self` and `b`.

@@ -7,7 +7,7 @@
 use crate::bounds::Sphere;
 use crate::patch::{WorkPatch, WorkVertex, Welder};
 use std::cmp::Reverse;
-use rustc_hash::FxHashMap;
+use rustc_hash::{FxHashMap, FxHashSet};
 use std::collections::BinaryHeap;
 
 /// Tuning of the simplifier.
@@ -113,6 +113,139 @@ pub fn simplify(m: &Merged, locks: &[bool], target_triangles: usize, cfg: &Simpl
         Some(&mut err),
     );
     (out, if err.is_finite() { err } else { 0.0 })
+}
+
+/// What [`repair`] changed.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RepairCounts {
+    pub flipped: u64,
+    pub folded_pairs_removed: u64,
+}
+
+/// Twice the area vector of a triangle of grid points, exactly (coordinates < 2^22).
+fn cross_q(a: [u32; 3], b: [u32; 3], c: [u32; 3]) -> [i64; 3] {
+    let u = [b[0] as i64 - a[0] as i64, b[1] as i64 - a[1] as i64, b[2] as i64 - a[2] as i64];
+    let v = [c[0] as i64 - a[0] as i64, c[1] as i64 - a[1] as i64, c[2] as i64 - a[2] as i64];
+    [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]]
+}
+
+/// Repairs defects the simplifier can leave, each of which makes an edge used by four
+/// triangles once neighbouring patches are put together:
+/// - an "ear" `(A, C, B)` whose edges `AC` and `CB` are both on the diamond's border
+///   (locked), next to a triangle `(A, B, D)` across `AB`. The neighbouring diamond sees
+///   the same border `A-C-B` and can grow the same ear on its side: the two ears are one
+///   triangle twice, a zero-volume fin hung on `AB`. Also a zero-area triangle whose
+///   middle corner `C` lies on segment `AB`. Flipping `AB` to `CD` gives `(A, C, D)` and
+///   `(C, B, D)`: the border edges `AC` and `CB` are kept, `AB` is gone. A flip that would
+///   turn a triangle over (against the normal of `(A, B, D)`) is not done.
+/// - a folded pair: two triangles on the same three points with opposite orientation
+///   (a zero-volume fin inside one diamond); both are removed, which leaves every other
+///   edge's count as is.
+///
+/// Positions decide (vertices welded by grid point), so attribute seams do not hide a
+/// defect. Only interior edges change; the locked border stays as it was.
+pub fn repair(vertices: &[WorkVertex], indices: &mut Vec<u32>) -> RepairCounts {
+    let mut counts = RepairCounts::default();
+    let q = |i: u32| vertices[i as usize].q;
+    // Folded pairs.
+    let mut by_set: FxHashMap<[[u32; 3]; 3], Vec<usize>> = FxHashMap::default();
+    for (t, tri) in indices.chunks_exact(3).enumerate() {
+        let mut k = [q(tri[0]), q(tri[1]), q(tri[2])];
+        k.sort();
+        by_set.entry(k).or_default().push(t);
+    }
+    let mut drop = vec![false; indices.len() / 3];
+    let rotation = |t: usize| {
+        let p = [q(indices[3 * t]), q(indices[3 * t + 1]), q(indices[3 * t + 2])];
+        let r = (0..3).min_by_key(|&k| p[k]).unwrap_or(0);
+        [p[r], p[(r + 1) % 3], p[(r + 2) % 3]]
+    };
+    for ts in by_set.values() {
+        // Same three points, opposite orientation (different canonical rotations).
+        if ts.len() == 2 && rotation(ts[0]) != rotation(ts[1]) {
+            drop[ts[0]] = true;
+            drop[ts[1]] = true;
+            counts.folded_pairs_removed += 1;
+        }
+    }
+    if counts.folded_pairs_removed > 0 {
+        let mut kept = Vec::with_capacity(indices.len());
+        for (t, tri) in indices.chunks_exact(3).enumerate() {
+            if !drop[t] {
+                kept.extend_from_slice(tri);
+            }
+        }
+        *indices = kept;
+    }
+    // Ears: directed edge -> triangle.
+    let mut edge: FxHashMap<(u32, u32), usize> = FxHashMap::with_capacity_and_hasher(indices.len(), Default::default());
+    for (t, tri) in indices.chunks_exact(3).enumerate() {
+        for k in 0..3 {
+            edge.insert((tri[k], tri[(k + 1) % 3]), t);
+        }
+    }
+    // Border edges: used once, vertices welded by position.
+    let mut uses: FxHashMap<([u32; 3], [u32; 3]), u32> = FxHashMap::with_capacity_and_hasher(indices.len(), Default::default());
+    let undirected = |a: [u32; 3], b: [u32; 3]| (a.min(b), a.max(b));
+    for tri in indices.chunks_exact(3) {
+        for k in 0..3 {
+            *uses.entry(undirected(q(tri[k]), q(tri[(k + 1) % 3]))).or_default() += 1;
+        }
+    }
+    let border = |a: u32, b: u32| uses.get(&undirected(q(a), q(b))) == Some(&1);
+    let mut on_border: FxHashSet<[u32; 3]> = FxHashSet::default();
+    for (&(a, b), &n) in &uses {
+        if n == 1 {
+            on_border.insert(a);
+            on_border.insert(b);
+        }
+    }
+    let dist2 = |a: [u32; 3], b: [u32; 3]| (0..3).map(|i| (a[i] as i64 - b[i] as i64).pow(2)).sum::<i64>();
+    let dot = |a: [i64; 3], b: [i64; 3]| a[0] as i128 * b[0] as i128 + a[1] as i128 * b[1] as i128 + a[2] as i128 * b[2] as i128;
+    for t in 0..indices.len() / 3 {
+        let tri = [indices[3 * t], indices[3 * t + 1], indices[3 * t + 2]];
+        let p = tri.map(q);
+        if p[0] == p[1] || p[1] == p[2] || p[0] == p[2] {
+            continue;
+        }
+        // Rotate to (A, C, B), directed edge B -> A to be flipped: for a zero-area
+        // triangle the longest edge, for a border ear the one edge not on the border.
+        let r = if cross_q(p[0], p[1], p[2]) == [0; 3] {
+            (0..3).max_by_key(|&k| dist2(p[(k + 2) % 3], p[k])).unwrap_or(0)
+        } else {
+            match (0..3).find(|&k| !border(tri[(k + 2) % 3], tri[k]) && border(tri[k], tri[(k + 1) % 3]) && border(tri[(k + 1) % 3], tri[(k + 2) % 3])) {
+                Some(k) => k,
+                None => continue,
+            }
+        };
+        let (a, c, b) = (tri[r], tri[(r + 1) % 3], tri[(r + 2) % 3]);
+        let Some(&t2) = edge.get(&(a, b)) else { continue };
+        let tri2 = [indices[3 * t2], indices[3 * t2 + 1], indices[3 * t2 + 2]];
+        let k2 = (0..3).find(|&k| tri2[k] == a).unwrap_or(0);
+        if tri2[(k2 + 1) % 3] != b {
+            continue;
+        }
+        let d = tri2[(k2 + 2) % 3];
+        let n2 = cross_q(q(a), q(b), q(d));
+        // D must be interior: a flip towards a border vertex makes a new triangle with
+        // all three corners on the border, an ear the neighbour may mirror.
+        if d == c || n2 == [0; 3] || on_border.contains(&q(d)) || edge.contains_key(&(c, d)) || edge.contains_key(&(d, c)) {
+            continue;
+        }
+        if dot(cross_q(q(a), q(c), q(d)), n2) <= 0 || dot(cross_q(q(c), q(b), q(d)), n2) <= 0 {
+            continue;
+        }
+        for (x, y) in [(a, c), (c, b), (b, a), (a, b), (b, d), (d, a)] {
+            edge.remove(&(x, y));
+        }
+        indices[3 * t..3 * t + 3].copy_from_slice(&[a, c, d]);
+        indices[3 * t2..3 * t2 + 3].copy_from_slice(&[c, b, d]);
+        for (x, y, tt) in [(a, c, t), (c, d, t), (d, a, t), (c, b, t2), (b, d, t2), (d, c, t2)] {
+            edge.insert((x, y), tt);
+        }
+        counts.flipped += 1;
+    }
+    counts
 }
 
 /// For every merged vertex, the surviving vertex it moves to: itself if it survived,
@@ -259,6 +392,32 @@ mod tests {
                 assert_eq!(d, i as u32, "survivors stay put");
             }
         }
+    }
+
+    #[test]
+    fn repair_flips_collinear_ear_and_drops_folded_pair() {
+        // Why: issue 2's crack tests found cuts where an edge was used by four triangles:
+        // two neighbouring diamonds each kept a zero-area ear (A, C, B) on their shared,
+        // locked border, each next to a triangle across AB.
+        let v = |x: u32, y: u32| WorkVertex { q: [x, y, 0], ..Default::default() };
+        // A C B on a line (the locked border), D an interior vertex fanned by E, F.
+        let verts = vec![v(0, 0), v(2, 0), v(4, 0), v(2, 3), v(0, 6), v(4, 6)];
+        let (a, c, b, d, e, f) = (0u32, 1, 2, 3, 4, 5);
+        let mut idx = vec![a, c, b, a, b, d, b, f, d, f, e, d, e, a, d];
+        let r = repair(&verts, &mut idx);
+        assert_eq!(r.flipped, 1);
+        assert_eq!(&idx[..6], &[a, c, d, c, b, d]);
+        // Border edges A->C and C->B survive; AB is gone.
+        let edges: Vec<(u32, u32)> = idx.chunks(3).flat_map(|t| (0..3).map(move |k| (t[k], t[(k + 1) % 3]))).collect();
+        assert!(edges.contains(&(a, c)) && edges.contains(&(c, b)) && !edges.contains(&(a, b)));
+        // The same ear next to a border vertex D is left alone: flipping would make a
+        // triangle with three border corners.
+        let mut idx = vec![a, c, b, a, b, d];
+        assert_eq!(repair(&verts[..4], &mut idx).flipped, 0);
+        let mut folded = vec![0u32, 1, 3, 0, 3, 1, 1, 2, 3];
+        let r = repair(&verts, &mut folded);
+        assert_eq!(r.folded_pairs_removed, 1);
+        assert_eq!(folded, vec![1, 2, 3]);
     }
 
     #[test]

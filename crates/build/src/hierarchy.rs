@@ -57,10 +57,16 @@ struct Ctx<'a> {
     diamond_ids: AtomicU32,
     degenerate: AtomicU64,
     duplicate: AtomicU64,
+    leaf_vertices_loaded: AtomicU64,
+    repaired: AtomicU64,
     attributes: u32,
     cfg: SimplifyConfig,
     step: f64,
 }
+
+/// Leaf vertices read from the memory-mapped vertex store between two releases of its
+/// resident pages (~1M vertices touch at most ~36 MB of the store, usually far less).
+const RELEASE_EVERY_VERTICES: u64 = 1 << 20;
 
 /// Below this many triangles a patch is not reduced further: tiny patches cost more in
 /// per-node overhead (draw calls, records) than they save.
@@ -115,7 +121,13 @@ impl Ctx<'_> {
                 indices.push(id);
             }
         }
-        let c = remove_bad_triangles(&mut indices);
+        // The vertex store is memory-mapped: release its resident pages every few
+        // megabytes of leaves, or RSS would grow towards the size of the whole store.
+        let loaded = self.leaf_vertices_loaded.fetch_add(local.len() as u64, Ordering::Relaxed) + local.len() as u64;
+        if loaded / RELEASE_EVERY_VERTICES != (loaded - local.len() as u64) / RELEASE_EVERY_VERTICES {
+            self.imp.vertices.release();
+        }
+        let c = remove_bad_triangles(&mut indices, &w.vertices);
         self.degenerate.fetch_add(c.degenerate, Ordering::Relaxed);
         self.duplicate.fetch_add(c.duplicate, Ordering::Relaxed);
         let mut p = WorkPatch { vertices: w.vertices, indices };
@@ -199,7 +211,9 @@ impl Ctx<'_> {
         let merged = diamond::merge(&refs);
         let locks = diamond::border_locks(&merged.vertices, &merged.indices);
         let target: usize = per_tet_tris.iter().map(|&n| parent_target(n, self.cfg.node_triangles)).sum();
-        let (simplified, err_grid) = diamond::simplify(&merged, &locks, target, &self.cfg);
+        let (mut simplified, err_grid) = diamond::simplify(&merged, &locks, target, &self.cfg);
+        let fixed = diamond::repair(&merged.vertices, &mut simplified);
+        self.repaired.fetch_add(fixed.flipped + fixed.folded_pairs_removed, Ordering::Relaxed);
         // 3. Morph destinations; the children are now complete and can be written.
         let dest = diamond::morph_destinations(&merged, &simplified);
         let mut child_err = 0.0f64;
@@ -317,6 +331,8 @@ pub(crate) fn build_hierarchy(
         diamond_ids: AtomicU32::new(0),
         degenerate: AtomicU64::new(0),
         duplicate: AtomicU64::new(0),
+        leaf_vertices_loaded: AtomicU64::new(0),
+        repaired: AtomicU64::new(0),
         attributes,
         cfg: SimplifyConfig {
             node_triangles: opts.node_triangles as usize,
@@ -358,6 +374,7 @@ pub(crate) fn build_hierarchy(
     }
     report.degenerate_triangles_removed = ctx.degenerate.load(Ordering::Relaxed);
     report.duplicate_triangles_removed = ctx.duplicate.load(Ordering::Relaxed);
+    report.simplifier_repairs = ctx.repaired.load(Ordering::Relaxed);
     finalize(&ctx, output, opts, progress, report)
 }
 

@@ -118,6 +118,8 @@ pub struct BuildReport {
     pub degenerate_triangles_removed: u64,
     pub duplicate_triangles_removed: u64,
     pub oversized_leaves: u64,
+    /// Ears flipped and folded pairs removed after simplification (see `diamond::repair`).
+    pub simplifier_repairs: u64,
     /// Bits of the quantisation grid (chosen or given).
     pub quant_bits: u32,
     /// Mean input edge length (model units), estimated from a sample of triangles.

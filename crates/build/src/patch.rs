@@ -139,14 +139,16 @@ pub struct CleanupCounts {
     pub duplicate: u64,
 }
 
-/// Drop triangles with repeated vertices and exact duplicates (same vertices, same
-/// orientation); keeps first occurrences in order.
-pub fn remove_bad_triangles(indices: &mut Vec<u32>) -> CleanupCounts {
+/// Drop degenerate triangles (two corners on one grid point, whatever their attributes)
+/// and exact duplicates (same vertices, same orientation); keeps first occurrences in
+/// order. Each input triangle lives in exactly one leaf, so the decision is global.
+pub fn remove_bad_triangles(indices: &mut Vec<u32>, vertices: &[WorkVertex]) -> CleanupCounts {
     let mut counts = CleanupCounts::default();
     let mut seen = FxHashSet::with_capacity_and_hasher(indices.len() / 3, Default::default());
     let mut out = Vec::with_capacity(indices.len());
     for t in indices.chunks_exact(3) {
-        if t[0] == t[1] || t[1] == t[2] || t[0] == t[2] {
+        let q = |k: usize| vertices[t[k] as usize].q;
+        if t[0] == t[1] || t[1] == t[2] || t[0] == t[2] || q(0) == q(1) || q(1) == q(2) || q(0) == q(2) {
             counts.degenerate += 1;
             continue;
         }
@@ -193,9 +195,10 @@ mod tests {
     fn bad_triangles_removed_orientation_kept() {
         // Why: duplicate faces would make edges non-manifold; a flipped copy is kept because
         // it is real (two-sided) geometry, not a duplicate.
-        let mut idx = vec![0, 1, 2, 1, 2, 0, 0, 0, 1, 2, 1, 0];
-        let c = remove_bad_triangles(&mut idx);
+        let verts = [v(1), v(2), v(3), v(3)];
+        let mut idx = vec![0, 1, 2, 1, 2, 0, 0, 0, 1, 2, 1, 0, 0, 2, 3];
+        let c = remove_bad_triangles(&mut idx, &verts);
         assert_eq!(idx, vec![0, 1, 2, 2, 1, 0]);
-        assert_eq!(c, CleanupCounts { degenerate: 1, duplicate: 1 });
+        assert_eq!(c, CleanupCounts { degenerate: 2, duplicate: 1 }, "(0, 2, 3) has two corners on one point");
     }
 }

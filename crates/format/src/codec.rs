@@ -13,7 +13,7 @@ use crate::error::FormatError;
 use crate::records::{ATTR_COLORS, ATTR_NORMALS, ATTR_UVS, NO_NODE};
 
 /// Version of the patch encoding (byte 8 of every patch header).
-pub const PATCH_CODEC_VERSION: u8 = 1;
+pub const PATCH_CODEC_VERSION: u8 = 3;
 /// Bytes of the fixed patch header that precedes the section payload.
 pub const PATCH_HEADER_BYTES: usize = 40;
 /// Patch flag: the section payload is one zstd frame.
@@ -140,15 +140,7 @@ pub fn encode_patch(patch: &PatchData, attributes: u32, quant_min: [u32; 3]) -> 
             .collect();
         sections[SEC_POSITIONS] = encode_vertices(&rel);
         if attributes & ATTR_NORMALS != 0 {
-            let oct: Vec<[u8; 4]> = patch
-                .normals
-                .iter()
-                .map(|&v| {
-                    let e = oct_encode(v);
-                    [e[0], e[1], 0, 0]
-                })
-                .collect();
-            sections[SEC_NORMALS] = encode_vertices(&oct);
+            sections[SEC_NORMALS] = encode_normals(patch);
         }
         if attributes & ATTR_COLORS != 0 {
             sections[SEC_COLORS] = encode_vertices(&patch.colors);
@@ -162,13 +154,7 @@ pub fn encode_patch(patch: &PatchData, attributes: u32, quant_min: [u32; 3]) -> 
             sections[SEC_UVS] = encode_vertices(&bits);
         }
         if !patch.morph_targets.is_empty() {
-            let diff: Vec<[u32; 3]> = patch
-                .positions
-                .iter()
-                .zip(&patch.morph_targets)
-                .map(|(p, t)| std::array::from_fn(|k| zigzag(t[k].wrapping_sub(p[k]) as i32)))
-                .collect();
-            sections[SEC_MORPH] = encode_vertices(&diff);
+            sections[SEC_MORPH] = encode_morph(&patch.positions, &patch.morph_targets);
         }
     }
 
@@ -201,6 +187,421 @@ pub fn encode_patch(patch: &PatchData, attributes: u32, quant_min: [u32; 3]) -> 
     debug_assert_eq!(out.len(), PATCH_HEADER_BYTES);
     out.extend_from_slice(&payload);
     out
+}
+
+/// Rice parameters are `0..=MAX_RICE_K`.
+const MAX_RICE_K: u32 = 7;
+/// A Rice quotient of this many or more is escaped: this many 1 bits, then the value's
+/// 8 bits.
+const RICE_ESCAPE: u32 = 16;
+
+/// The normals section (see `docs/format.md`): per vertex, the octahedral code minus the
+/// code predicted from the patch geometry ([`predict_normals`]), wrapping in `u8`,
+/// zigzagged and Rice-coded, all x residuals first, then all y residuals, each stream
+/// with its own Rice parameter.
+fn encode_normals(patch: &PatchData) -> Vec<u8> {
+    let n = patch.positions.len();
+    let pred = predict_normals(&patch.positions, &patch.indices);
+    let mut z = vec![0u8; 2 * n];
+    for (i, (&v, p)) in patch.normals.iter().zip(&pred).enumerate() {
+        let e = oct_encode(v);
+        z[i] = zigzag(e[0].wrapping_sub(p[0]) as i8 as i32) as u8;
+        z[n + i] = zigzag(e[1].wrapping_sub(p[1]) as i8 as i32) as u8;
+    }
+    let streams = [&z[..n], &z[n..]];
+    let ks = streams.map(|st| {
+        (0..=MAX_RICE_K)
+            .min_by_key(|&k| st.iter().map(|&v| rice_bits(v, k) as u64).sum::<u64>())
+            .unwrap_or(0)
+    });
+    let mut out = vec![ks[0] as u8, ks[1] as u8];
+    let mut w = BitWriter::new(&mut out);
+    for (st, k) in streams.iter().zip(ks) {
+        for &v in st.iter() {
+            let q = v as u32 >> k;
+            if q < RICE_ESCAPE {
+                // q one bits, a zero bit, then the k low bits of v.
+                w.put((1 << q) - 1, q + 1);
+                w.put(v as u64 & ((1 << k) - 1), k);
+            } else {
+                w.put((1 << RICE_ESCAPE) - 1, RICE_ESCAPE);
+                w.put(v as u64, 8);
+            }
+        }
+    }
+    w.finish();
+    out
+}
+
+/// Length in bits of `v`'s Rice code with parameter `k`.
+fn rice_bits(v: u8, k: u32) -> u32 {
+    let q = v as u32 >> k;
+    if q < RICE_ESCAPE {
+        q + 1 + k
+    } else {
+        RICE_ESCAPE + 8
+    }
+}
+
+/// Appends bits LSB-first (bit `i` of the stream is bit `i % 8` of byte `i / 8`).
+struct BitWriter<'a> {
+    out: &'a mut Vec<u8>,
+    acc: u64,
+    bits: u32,
+}
+
+impl<'a> BitWriter<'a> {
+    fn new(out: &'a mut Vec<u8>) -> Self {
+        BitWriter {
+            out,
+            acc: 0,
+            bits: 0,
+        }
+    }
+
+    /// Appends the `count` (at most 32) low bits of `v`, low bit first.
+    fn put(&mut self, v: u64, count: u32) {
+        self.acc |= v << self.bits;
+        self.bits += count;
+        while self.bits >= 8 {
+            self.out.push(self.acc as u8);
+            self.acc >>= 8;
+            self.bits -= 8;
+        }
+    }
+
+    /// Flushes the last partial byte, padded with zero bits.
+    fn finish(self) {
+        if self.bits > 0 {
+            self.out.push(self.acc as u8);
+        }
+    }
+}
+
+/// Decodes the normals section (see [`encode_normals`]) given the decoded positions and
+/// indices (every index `< positions.len()`).
+fn decode_normals(
+    section: &[u8],
+    positions: &[[u32; 3]],
+    indices: &[u32],
+) -> Result<Vec<[f32; 3]>, FormatError> {
+    let n = positions.len();
+    let (ks, bits) = match section {
+        [kx, ky, rest @ ..] if (*kx as u32) <= MAX_RICE_K && (*ky as u32) <= MAX_RICE_K => {
+            ([*kx as u32, *ky as u32], rest)
+        }
+        _ => return Err(corrupt("bad normals section header")),
+    };
+    let total_bits = bits.len() as u64 * 8;
+    // Bit position; every code is at most 24 bits, so one 56-bit peek covers it.
+    let mut pos = 0u64;
+    let peek = |pos: u64| -> u64 {
+        let at = (pos / 8) as usize;
+        if let Some(w) = bits.get(at..at + 8) {
+            let w: [u8; 8] = w.try_into().unwrap_or_default();
+            return u64::from_le_bytes(w) >> (pos % 8);
+        }
+        let mut buf = [0u8; 8];
+        let avail = bits.len().saturating_sub(at).min(8);
+        buf[..avail].copy_from_slice(&bits[at.min(bits.len())..at.min(bits.len()) + avail]);
+        u64::from_le_bytes(buf) >> (pos % 8)
+    };
+    let mut z = vec![0u8; 2 * n];
+    for (c, zc) in z
+        .chunks_exact_mut(n.max(1))
+        .enumerate()
+        .take(if n == 0 { 0 } else { 2 })
+    {
+        let k = ks[c];
+        for v in zc.iter_mut() {
+            let word = peek(pos);
+            let q = (word.trailing_ones()).min(RICE_ESCAPE);
+            if q < RICE_ESCAPE {
+                *v = (((q as u64) << k) | ((word >> (q + 1)) & ((1 << k) - 1))) as u8;
+                if (q as u64) << k > 255 {
+                    return Err(corrupt("normal residual out of range"));
+                }
+                pos += (q + 1 + k) as u64;
+            } else {
+                *v = (word >> RICE_ESCAPE) as u8;
+                pos += (RICE_ESCAPE + 8) as u64;
+            }
+            if pos > total_bits {
+                return Err(corrupt("truncated normals section"));
+            }
+        }
+    }
+    // The stream must end in its last byte, padded with zero bits.
+    if pos.div_ceil(8) != bits.len() as u64 || peek(pos) != 0 {
+        return Err(corrupt("trailing bits in the normals section"));
+    }
+    let pred = predict_normals(positions, indices);
+    Ok(pred
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let r = [unzigzag(z[i] as u32) as u8, unzigzag(z[n + i] as u32) as u8];
+            oct_decode([p[0].wrapping_add(r[0]), p[1].wrapping_add(r[1])])
+        })
+        .collect())
+}
+
+/// Exact integer accumulator for the summed face normals: `i64` when the patch is small
+/// enough for it never to overflow, `i128` otherwise. Both give the same integers.
+trait Acc:
+    Copy
+    + Default
+    + std::ops::Add<Output = Self>
+    + std::ops::Sub<Output = Self>
+    + std::ops::Mul<Output = Self>
+    + PartialEq
+    + From<i64>
+{
+    fn to_f64(self) -> f64;
+}
+impl Acc for i64 {
+    fn to_f64(self) -> f64 {
+        self as f64
+    }
+}
+impl Acc for i128 {
+    fn to_f64(self) -> f64 {
+        self as f64
+    }
+}
+
+/// Octahedral code of a nonzero vector with integer components (exact in f64): L1
+/// projection and fold as in [`oct_encode`], but in f64 and rounded to the nearest grid
+/// point (`floor(127 v + 0.5)`), which is cheap and easy to reproduce exactly.
+fn oct_predict(v: [f64; 3]) -> [u8; 2] {
+    let l1 = v[0].abs() + v[1].abs() + v[2].abs();
+    let (mut x, mut y) = (v[0] / l1, v[1] / l1);
+    if v[2] < 0.0 {
+        let (ox, oy) = (x, y);
+        x = (1.0 - oy.abs()) * if ox >= 0.0 { 1.0 } else { -1.0 };
+        y = (1.0 - ox.abs()) * if oy >= 0.0 { 1.0 } else { -1.0 };
+    }
+    let q = |c: f64| ((c * 127.0 + 0.5).floor() as i32).clamp(-127, 127) as i8 as u8;
+    [q(x), q(y)]
+}
+
+/// Octahedral code of +Z, the prediction of a vertex whose summed face normal is zero.
+const OCT_PLUS_Z: [u8; 2] = [0, 127];
+
+/// Predicted octahedral code of every vertex: the sum of the unnormalised normals
+/// `(p1 - p0) x (p2 - p0)` of the triangles using it, computed exactly in integers,
+/// then quantised by [`oct_predict`] in f64; [`OCT_PLUS_Z`] for a zero sum. Bit-exact on
+/// every platform (the arithmetic is spelled out in `docs/format.md`).
+/// Invariant under rotating a triangle's corners (what the index codec may do).
+/// `indices` must all be `< positions.len()`.
+fn predict_normals(positions: &[[u32; 3]], indices: &[u32]) -> Vec<[u8; 2]> {
+    let n = positions.len();
+    // Extent of the patch: every coordinate difference is < 2^e in magnitude.
+    let mut lo = [u32::MAX; 3];
+    let mut hi = [0u32; 3];
+    for p in positions {
+        for k in 0..3 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
+    let extent = (0..3)
+        .map(|k| hi[k].saturating_sub(lo[k]))
+        .max()
+        .unwrap_or(0);
+    let e = 32 - extent.leading_zeros();
+    let tb = 32 - ((indices.len() / 3) as u32).leading_zeros();
+    // |component| < 2 * 2^(2e) per triangle, summed over fewer than 2^tb triangles.
+    if 2 * e + 1 + tb <= 63 {
+        predict_with::<i64>(positions, indices, n)
+    } else {
+        predict_with::<i128>(positions, indices, n)
+    }
+}
+
+fn predict_with<T: Acc>(positions: &[[u32; 3]], indices: &[u32], n: usize) -> Vec<[u8; 2]> {
+    let mut sums = vec![[T::default(); 3]; n];
+    for t in indices.chunks_exact(3) {
+        let p = |c: usize| positions[t[c] as usize].map(|v| v as i64);
+        let (p0, p1, p2) = (p(0), p(1), p(2));
+        let a: [T; 3] = std::array::from_fn(|k| T::from(p1[k] - p0[k]));
+        let b: [T; 3] = std::array::from_fn(|k| T::from(p2[k] - p0[k]));
+        let c = [
+            a[1] * b[2] - a[2] * b[1],
+            a[2] * b[0] - a[0] * b[2],
+            a[0] * b[1] - a[1] * b[0],
+        ];
+        for &v in t {
+            let s = &mut sums[v as usize];
+            for k in 0..3 {
+                s[k] = s[k] + c[k];
+            }
+        }
+    }
+    let zero = T::default();
+    sums.iter()
+        .map(|s| {
+            if s[0] == zero && s[1] == zero && s[2] == zero {
+                return OCT_PLUS_Z;
+            }
+            oct_predict(s.map(|x| x.to_f64()))
+        })
+        .collect()
+}
+
+/// Morph code of a vertex that stays where it is (target == own position).
+const MORPH_STAYS: u32 = 0;
+/// Morph code of a vertex whose target is stored explicitly (no surviving patch vertex
+/// sits at the target).
+const MORPH_EXPLICIT: u32 = 1;
+/// Morph codes from this value on reference a surviving vertex: `code - MORPH_REF_BASE`
+/// is the zigzagged difference of survivor ranks (see `docs/format.md`).
+const MORPH_REF_BASE: u32 = 2;
+
+/// The morph section: `u32` length of the code bytes, one LEB128 code per vertex, then
+/// the explicit targets (zigzag `target - position`, `[u32; 3]`, vertex codec) of the
+/// vertices coded [`MORPH_EXPLICIT`], absent when there are none.
+///
+/// Removed vertices almost always move to a surviving vertex of the same patch, usually
+/// a mesh neighbour close in the vertex-fetch order, so a reference is coded as the
+/// distance between survivor ranks: `rank(ref) - survivors_before(i)`.
+fn encode_morph(positions: &[[u32; 3]], targets: &[[u32; 3]]) -> Vec<u8> {
+    // Survivors (vertices that stay), sorted by position then rank, for lookups.
+    let mut survivors: Vec<([u32; 3], u32)> = Vec::new();
+    for (p, t) in positions.iter().zip(targets) {
+        if p == t {
+            survivors.push((*p, survivors.len() as u32));
+        }
+    }
+    survivors.sort_unstable();
+    let mut codes = Vec::with_capacity(positions.len() + 4);
+    codes.extend_from_slice(&[0; 4]);
+    let mut explicit: Vec<[u32; 3]> = Vec::new();
+    let mut before = 0u32; // survivors with a smaller vertex index
+    for (p, t) in positions.iter().zip(targets) {
+        let code = if p == t {
+            before += 1;
+            MORPH_STAYS
+        } else {
+            let lo = survivors.partition_point(|s| s.0 < *t);
+            let hi = lo + survivors[lo..].partition_point(|s| s.0 == *t);
+            // Among survivors at the target, the rank closest to this vertex.
+            let best = survivors[lo..hi]
+                .iter()
+                .map(|s| s.1 as i64 - before as i64)
+                .min_by_key(|d| (d.abs(), *d));
+            match best {
+                Some(d) => zigzag(d as i32) + MORPH_REF_BASE,
+                None => {
+                    explicit.push(std::array::from_fn(|k| {
+                        zigzag(t[k].wrapping_sub(p[k]) as i32)
+                    }));
+                    MORPH_EXPLICIT
+                }
+            }
+        };
+        push_varint(&mut codes, code);
+    }
+    let code_bytes = (codes.len() - 4) as u32;
+    codes[..4].copy_from_slice(&code_bytes.to_le_bytes());
+    if !explicit.is_empty() {
+        codes.extend_from_slice(&encode_vertices(&explicit));
+    }
+    codes
+}
+
+/// Decodes the morph section (see [`encode_morph`]) for `positions`.
+fn decode_morph(section: &[u8], positions: &[[u32; 3]]) -> Result<Vec<[u32; 3]>, FormatError> {
+    let n = positions.len();
+    let code_bytes = section
+        .get(..4)
+        .map(|_| le_u32(section, 0) as usize)
+        .ok_or_else(|| corrupt("morph section too short"))?;
+    let mut rest = section
+        .get(4..)
+        .and_then(|s| s.get(..code_bytes))
+        .ok_or_else(|| corrupt("morph codes exceed the section"))?;
+    let mut codes = Vec::with_capacity(n);
+    let mut survivors: Vec<u32> = Vec::with_capacity(n);
+    let mut explicit_count = 0usize;
+    for i in 0..n {
+        let code = read_varint(&mut rest).ok_or_else(|| corrupt("truncated morph code"))?;
+        match code {
+            MORPH_STAYS => survivors.push(i as u32),
+            MORPH_EXPLICIT => explicit_count += 1,
+            _ => {}
+        }
+        codes.push(code);
+    }
+    if !rest.is_empty() {
+        return Err(corrupt("trailing morph code bytes"));
+    }
+    let tail = &section[4 + code_bytes..];
+    let explicit: Vec<[u32; 3]> = if explicit_count > 0 {
+        decode_vertices(tail, explicit_count, "explicit morph targets")?
+    } else if tail.is_empty() {
+        Vec::new()
+    } else {
+        return Err(corrupt("explicit morph targets without explicit codes"));
+    };
+    let mut explicit = explicit.iter();
+    let mut targets = Vec::with_capacity(n);
+    let mut before = 0i64;
+    for (p, &code) in positions.iter().zip(&codes) {
+        let t = match code {
+            MORPH_STAYS => {
+                before += 1;
+                *p
+            }
+            MORPH_EXPLICIT => {
+                let d = explicit
+                    .next()
+                    .ok_or_else(|| corrupt("missing explicit target"))?;
+                // Wrapping: every u32 target round-trips, however far from `p`.
+                std::array::from_fn(|k| p[k].wrapping_add(unzigzag(d[k]) as u32))
+            }
+            _ => {
+                let rank = before + unzigzag(code - MORPH_REF_BASE) as i64;
+                let v = usize::try_from(rank)
+                    .ok()
+                    .and_then(|r| survivors.get(r))
+                    .ok_or_else(|| {
+                        corrupt(format!(
+                            "morph reference to survivor {rank} of {}",
+                            survivors.len()
+                        ))
+                    })?;
+                positions[*v as usize]
+            }
+        };
+        targets.push(t);
+    }
+    Ok(targets)
+}
+
+fn push_varint(out: &mut Vec<u8>, mut v: u32) {
+    while v >= 0x80 {
+        out.push(v as u8 | 0x80);
+        v >>= 7;
+    }
+    out.push(v as u8);
+}
+
+/// Reads one LEB128 `u32` (at most 5 bytes, no bits beyond 32), advancing `b`.
+fn read_varint(b: &mut &[u8]) -> Option<u32> {
+    let mut v = 0u32;
+    for k in 0..5 {
+        let (&byte, rest) = b.split_first()?;
+        *b = rest;
+        if k == 4 && byte > 0x0f {
+            return None;
+        }
+        v |= ((byte & 0x7f) as u32) << (7 * k);
+        if byte < 0x80 {
+            return Some(v);
+        }
+    }
+    None
 }
 
 fn encode_vertices<T>(v: &[T]) -> Vec<u8> {
@@ -308,6 +709,7 @@ pub fn decode_patch(
         let bound = match exp {
             None => 0,
             Some(_) if k == SEC_INDICES => index_section_bound(t as u64),
+            Some(_) if k == SEC_MORPH => 4 + 5 * n64 + vertex_section_bound(n64, 12),
             Some(size) => vertex_section_bound(n64, size),
         };
         if exp.is_some() && len == 0 || len > bound {
@@ -373,8 +775,7 @@ pub fn decode_patch(
         }
     }
     if attributes & ATTR_NORMALS != 0 {
-        let oct: Vec<[u8; 4]> = decode_vertices(secs[SEC_NORMALS], nu, "normals")?;
-        patch.normals = oct.iter().map(|e| oct_decode([e[0], e[1]])).collect();
+        patch.normals = decode_normals(secs[SEC_NORMALS], &positions, &patch.indices)?;
     }
     if attributes & ATTR_COLORS != 0 {
         patch.colors = decode_vertices(secs[SEC_COLORS], nu, "colors")?;
@@ -387,17 +788,7 @@ pub fn decode_patch(
             .collect();
     }
     if morph {
-        let diff: Vec<[u32; 3]> = decode_vertices(secs[SEC_MORPH], nu, "morph targets")?;
-        let mut targets = Vec::with_capacity(nu);
-        for (p, d) in positions.iter().zip(&diff) {
-            let mut q = [0u32; 3];
-            for k in 0..3 {
-                let v = p[k] as i64 + unzigzag(d[k]) as i64;
-                q[k] = u32::try_from(v).map_err(|_| corrupt("morph target outside the grid"))?;
-            }
-            targets.push(q);
-        }
-        patch.morph_targets = targets;
+        patch.morph_targets = decode_morph(secs[SEC_MORPH], &positions)?;
     }
     patch.positions = positions;
     Ok(patch)

@@ -1,0 +1,286 @@
+//! Helpers shared by the integration tests of `tessera-cli`: generate and build test
+//! models through the library crates, decode and merge cuts, read meshes back, run the
+//! `tessera` binary, and look for leftover temporary files.
+#![allow(dead_code)]
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use tessera_build::{BuildOptions, BuildReport, NoProgress};
+use tessera_format::{Header, Model, PatchData};
+use tessera_mesh::{MeshError, MeshHeader, MeshVisitor, Vertex};
+use tessera_select::{edge_report, merge_patches, CutMesh, EdgeReport, PatchRef};
+
+/// Small nodes so that small meshes give deep hierarchies.
+pub fn small_options() -> BuildOptions {
+    BuildOptions {
+        memory_bytes: 256 << 20,
+        threads: Some(2),
+        leaf_triangles: 400,
+        node_triangles: 200,
+        ..BuildOptions::default()
+    }
+}
+
+/// A generated sphere built into a model, in its own temporary directory.
+pub struct Built {
+    pub dir: tempfile::TempDir,
+    pub input: PathBuf,
+    pub model_path: PathBuf,
+    pub report: BuildReport,
+    pub model: Model,
+}
+
+/// Generates a noisy closed sphere of about `triangles` triangles and builds it.
+pub fn build_sphere(triangles: u64, seed: u64, colors: bool, opts: &BuildOptions) -> Built {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let input = dir.path().join(format!("sphere-{triangles}-{seed}.ply"));
+    tessera_gen::write_sphere(&input, &tessera_gen::SphereOptions { triangles, seed, colors, noise: 0.05 })
+        .expect("generate sphere");
+    build_file(dir, input, opts)
+}
+
+/// Builds `input` (inside `dir`) into `dir/model.tsr`.
+pub fn build_file(dir: tempfile::TempDir, input: PathBuf, opts: &BuildOptions) -> Built {
+    let model_path = dir.path().join("model.tsr");
+    let report = tessera_build::build(&input, &model_path, opts, &NoProgress)
+        .unwrap_or_else(|e| panic!("building {}: {e}", input.display()));
+    let model = Model::open(&model_path).expect("open built model");
+    Built { dir, input, model_path, report, model }
+}
+
+/// Every patch of a model, decoded once.
+pub fn decode_all(m: &Model) -> Vec<PatchData> {
+    (0..m.nodes().len()).map(|i| m.decode_patch(i).unwrap_or_else(|e| panic!("node {i}: {e}"))).collect()
+}
+
+/// Merges the patches of `nodes` (from pre-decoded `patches`) into one mesh.
+pub fn merge(patches: &[PatchData], nodes: &[u32]) -> CutMesh {
+    merge_patches(nodes.iter().map(|&i| {
+        let p = &patches[i as usize];
+        PatchRef { positions: &p.positions, normals: &p.normals, colors: &p.colors, uvs: &p.uvs, indices: &p.indices }
+    }))
+}
+
+/// Edge report of the merged cut.
+pub fn cut_report(patches: &[PatchData], nodes: &[u32]) -> (CutMesh, EdgeReport) {
+    let mesh = merge(patches, nodes);
+    let r = edge_report(&mesh.indices, &mesh.positions);
+    (mesh, r)
+}
+
+/// A detailed description of where the open / non-manifold edges of a cut are: for the
+/// first few offending edges, the grid positions of their ends and the (node, level) of
+/// every selected patch that uses them.
+/// Boundary edges for which `allowed_boundary` holds are not counted as bad.
+pub fn describe_bad_edges(
+    m: &Model,
+    patches: &[PatchData],
+    nodes: &[u32],
+    limit: usize,
+    allowed_boundary: &dyn Fn([u32; 3], [u32; 3]) -> bool,
+) -> String {
+    let mut uses: HashMap<([u32; 3], [u32; 3]), Vec<u32>> = HashMap::new();
+    for &n in nodes {
+        let p = &patches[n as usize];
+        for t in p.indices.chunks_exact(3) {
+            let c = [p.positions[t[0] as usize], p.positions[t[1] as usize], p.positions[t[2] as usize]];
+            if c[0] == c[1] || c[1] == c[2] || c[2] == c[0] {
+                continue;
+            }
+            for (a, b) in [(c[0], c[1]), (c[1], c[2]), (c[2], c[0])] {
+                let key = if a < b { (a, b) } else { (b, a) };
+                uses.entry(key).or_default().push(n);
+            }
+        }
+    }
+    let mut bad: Vec<_> =
+        uses.into_iter().filter(|((a, b), v)| v.len() > 2 || (v.len() == 1 && !allowed_boundary(*a, *b))).collect();
+    bad.sort();
+    let mut by_node: HashMap<u32, usize> = HashMap::new();
+    for (_, v) in &bad {
+        for &n in v {
+            *by_node.entry(n).or_default() += 1;
+        }
+    }
+    let mut nodes_hit: Vec<_> = by_node.into_iter().collect();
+    nodes_hit.sort_by_key(|&(n, c)| (std::cmp::Reverse(c), n));
+    let all = m.nodes();
+    let mut s = format!("{} bad edges; patches touching them (node/level/bad edges): ", bad.len());
+    for (n, c) in nodes_hit.iter().take(12) {
+        s += &format!("{n}/L{}/{c} ", all[*n as usize].level);
+    }
+    for ((a, b), v) in bad.iter().take(limit) {
+        let lv: Vec<String> = v.iter().map(|&n| format!("{n}(L{})", all[n as usize].level)).collect();
+        s += &format!("\n    edge {a:?}-{b:?} used {} times by {}", v.len(), lv.join(", "));
+    }
+    s
+}
+
+/// The triangles of an input mesh, as read back by `tessera_mesh`.
+#[derive(Default)]
+pub struct InputMesh {
+    pub attributes: tessera_mesh::Attributes,
+    pub positions: Vec<[f32; 3]>,
+    pub normals: Vec<[f32; 3]>,
+    pub colors: Vec<[u8; 4]>,
+    pub triangles: Vec<[u32; 3]>,
+}
+
+impl MeshVisitor for InputMesh {
+    fn header(&mut self, h: &MeshHeader) -> Result<(), MeshError> {
+        self.attributes = h.attributes;
+        Ok(())
+    }
+    fn vertex(&mut self, v: &Vertex) -> Result<(), MeshError> {
+        self.positions.push(v.position);
+        self.normals.push(v.normal);
+        self.colors.push(v.color);
+        Ok(())
+    }
+    fn triangle(&mut self, t: [u32; 3]) -> Result<(), MeshError> {
+        self.triangles.push(t);
+        Ok(())
+    }
+}
+
+pub fn read_input(path: &Path) -> InputMesh {
+    let mut m = InputMesh::default();
+    tessera_mesh::read_mesh(path, &mut m).unwrap_or_else(|e| panic!("reading {}: {e}", path.display()));
+    m
+}
+
+/// The builder's quantisation, recomputed from the header:
+/// `q = round((p - cube_origin) / cube_size * 2^quant_bits)`, clamped into the grid.
+pub fn quantize(h: &Header, p: [f32; 3]) -> [u32; 3] {
+    let n = (h.quant_bits as f64).exp2();
+    std::array::from_fn(|i| ((f64::from(p[i]) - h.cube_origin[i]) / h.cube_size * n).round().clamp(0.0, n) as u32)
+}
+
+/// A triangle of grid points rotated so that its smallest corner comes first
+/// (orientation kept).
+pub fn canonical_triangle(t: [[u32; 3]; 3]) -> [[u32; 3]; 3] {
+    let k = (0..3).min_by_key(|&k| t[k]).unwrap_or(0);
+    [t[k], t[(k + 1) % 3], t[(k + 2) % 3]]
+}
+
+/// Sorted canonical triangles of grid positions.
+pub fn triangle_set(positions: &[[u32; 3]], indices: impl Iterator<Item = [u32; 3]>) -> Vec<[[u32; 3]; 3]> {
+    let mut v: Vec<_> = indices
+        .map(|t| canonical_triangle([positions[t[0] as usize], positions[t[1] as usize], positions[t[2] as usize]]))
+        .collect();
+    v.sort_unstable();
+    v
+}
+
+/// Squared distance from `p` to triangle `abc` (Ericson, Real-Time Collision Detection 5.1.5).
+pub fn point_triangle_dist2(p: [f64; 3], a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> f64 {
+    let sub = |x: [f64; 3], y: [f64; 3]| [x[0] - y[0], x[1] - y[1], x[2] - y[2]];
+    let dot = |x: [f64; 3], y: [f64; 3]| x[0] * y[0] + x[1] * y[1] + x[2] * y[2];
+    let at = |o: [f64; 3], u: [f64; 3], s: f64, v: [f64; 3], t: f64| {
+        [o[0] + u[0] * s + v[0] * t, o[1] + u[1] * s + v[1] * t, o[2] + u[2] * s + v[2] * t]
+    };
+    let d2 = |q: [f64; 3]| {
+        let d = sub(p, q);
+        dot(d, d)
+    };
+    let (ab, ac, ap) = (sub(b, a), sub(c, a), sub(p, a));
+    let (d1, d2_) = (dot(ab, ap), dot(ac, ap));
+    if d1 <= 0.0 && d2_ <= 0.0 {
+        return d2(a);
+    }
+    let bp = sub(p, b);
+    let (d3, d4) = (dot(ab, bp), dot(ac, bp));
+    if d3 >= 0.0 && d4 <= d3 {
+        return d2(b);
+    }
+    let vc = d1 * d4 - d3 * d2_;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        let v = d1 / (d1 - d3);
+        return d2(at(a, ab, v, ac, 0.0));
+    }
+    let cp = sub(p, c);
+    let (d5, d6) = (dot(ab, cp), dot(ac, cp));
+    if d6 >= 0.0 && d5 <= d6 {
+        return d2(c);
+    }
+    let vb = d5 * d2_ - d1 * d6;
+    if vb <= 0.0 && d2_ >= 0.0 && d6 <= 0.0 {
+        let w = d2_ / (d2_ - d6);
+        return d2(at(a, ab, 0.0, ac, w));
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+        let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        let bc = sub(c, b);
+        return d2(at(b, bc, w, bc, 0.0));
+    }
+    let denom = 1.0 / (va + vb + vc);
+    let (v, w) = (vb * denom, vc * denom);
+    d2(at(a, ab, v, ac, w))
+}
+
+/// A tiny deterministic RNG (xorshift64*).
+pub struct XorShift(pub u64);
+
+impl XorShift {
+    pub fn next_u64(&mut self) -> u64 {
+        let mut x = self.0;
+        x ^= x >> 12;
+        x ^= x << 25;
+        x ^= x >> 27;
+        self.0 = x;
+        x.wrapping_mul(0x2545_f491_4f6c_dd1d)
+    }
+    /// Uniform in [0, 1).
+    pub fn unit(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
+    pub fn range(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * self.unit()
+    }
+    /// Uniform direction on the unit sphere.
+    pub fn direction(&mut self) -> [f64; 3] {
+        loop {
+            let v = [self.range(-1.0, 1.0), self.range(-1.0, 1.0), self.range(-1.0, 1.0)];
+            let l2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+            if l2 > 1e-4 && l2 <= 1.0 {
+                let l = l2.sqrt();
+                return [v[0] / l, v[1] / l, v[2] / l];
+            }
+        }
+    }
+}
+
+/// The `tessera` binary.
+pub fn tessera() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_tessera"));
+    c.env_remove("TESSERA_LOG");
+    c
+}
+
+/// Runs `tessera ARGS`, returning (exit code, stdout, stderr).
+pub fn run_tessera(args: &[&std::ffi::OsStr]) -> (i32, String, String) {
+    let Output { status, stdout, stderr } = tessera().args(args).output().expect("run tessera");
+    (status.code().unwrap_or(-1), String::from_utf8_lossy(&stdout).into_owned(), String::from_utf8_lossy(&stderr).into_owned())
+}
+
+/// Convenience: arguments as OsStr from anything path-like or string-like.
+#[macro_export]
+macro_rules! args {
+    ($($a:expr),* $(,)?) => { &[$(std::ffi::OsStr::new(&$a)),*] };
+}
+
+/// Names in `dir` that look like leftovers of a failed build or write: the builder's
+/// `.tessera-build-*` directories and the writers' `.NAME.tmp-*` files.
+pub fn leftovers(dir: &Path) -> Vec<String> {
+    std::fs::read_dir(dir)
+        .map(|rd| {
+            rd.filter_map(|e| e.ok())
+                .map(|e| e.file_name().to_string_lossy().into_owned())
+                .filter(|n| n.starts_with(".tessera-build-") || (n.starts_with('.') && n.contains(".tmp-")))
+                .collect()
+        })
+        .unwrap_or_default()
+}
