@@ -227,9 +227,13 @@ pub fn repair(vertices: &[WorkVertex], indices: &mut Vec<u32>) -> RepairCounts {
         }
         let d = tri2[(k2 + 2) % 3];
         let n2 = cross_q(q(a), q(b), q(d));
-        // D must be interior: a flip towards a border vertex makes a new triangle with
-        // all three corners on the border, an ear the neighbour may mirror.
-        if d == c || n2 == [0; 3] || on_border.contains(&q(d)) || edge.contains_key(&(c, d)) || edge.contains_key(&(d, c)) {
+        // A flip towards a border vertex D makes a triangle with three corners on the
+        // border, which the neighbour may mirror: only done when the ear is folded (it
+        // faces against the surface normal at C), i.e. when it is the wrong one of a pair.
+        let n_ear = cross_q(q(a), q(c), q(b));
+        let nc = vertices[c as usize].normal;
+        let folded = n_ear.iter().zip(nc).map(|(&x, y)| x as f64 * y as f64).sum::<f64>() < 0.0;
+        if d == c || n2 == [0; 3] || (on_border.contains(&q(d)) && !folded) || edge.contains_key(&(c, d)) || edge.contains_key(&(d, c)) {
             continue;
         }
         if dot(cross_q(q(a), q(c), q(d)), n2) <= 0 || dot(cross_q(q(c), q(b), q(d)), n2) <= 0 {
