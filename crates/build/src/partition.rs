@@ -143,13 +143,25 @@ pub fn partition(imp: &Imported, tmp: &Path, opts: &BuildOptions, progress: &dyn
     let mean_edge = mean_edge_length(imp)?;
     let bits = opts.quant_bits.unwrap_or_else(|| auto_quant_bits(size, mean_edge));
     let grid = Grid::new(imp.bounds.min, imp.bounds.max, bits);
-    let key_depth = key_depth(imp.face_count, grid.bits, opts);
+    let (shallow, deep) = key_depths(imp.face_count, grid.bits, opts);
     let keys_path = tmp.join("keys.bin");
     let t = std::time::Instant::now();
-    write_keys(imp, &grid, key_depth, &keys_path, opts, progress)?;
-    tracing::info!(seconds = t.elapsed().as_secs_f64(), "partition: keys");
+    write_keys(imp, &grid, shallow, &keys_path, opts, progress)?;
+    let crowded = crowded_cells(&keys_path, imp.face_count, shallow, opts)?;
+    let key_depth = if crowded.is_empty() { shallow } else { deep };
+    deepen_keys(imp, &grid, &keys_path, shallow, deep, &crowded, opts, progress)?;
+    tracing::info!(seconds = t.elapsed().as_secs_f64(), shallow, key_depth, "partition: keys");
     let t = std::time::Instant::now();
     let split = choose_splits(&keys_path, imp.face_count, key_depth, opts, progress)?;
+    // The conformity closure can split cells below `shallow` that were not crowded; their
+    // faces need deep keys too, or routing would put them all in the cell's first leaf.
+    let closure_cells: HashSet<u64> = split
+        .iter()
+        .filter(|id| id.1 >= shallow)
+        .map(|&(r, l, p)| prefix(dfs_key(r, l, p), shallow))
+        .filter(|c| !crowded.contains(c))
+        .collect();
+    deepen_keys(imp, &grid, &keys_path, shallow, deep, &closure_cells, opts, progress)?;
     tracing::info!(seconds = t.elapsed().as_secs_f64(), splits = split.len(), "partition: counts and closure");
     let t = std::time::Instant::now();
     let mut leaves = leaves_of(&split);
@@ -160,15 +172,86 @@ pub fn partition(imp: &Imported, tmp: &Path, opts: &BuildOptions, progress: &dyn
     Ok(Partition { grid, split, leaves, buckets, oversized_leaves: oversized, key_depth, mean_edge })
 }
 
-/// How deep to key triangles. Leaves of a surface sit near depth `1.5 log2(N / cap)`
-/// (a surface crosses ~4^j of the 8^j cubes of octree level j, and 3 tetrahedron levels
-/// make one octree level); 12 more levels resolve density contrasts of ~250x at full
-/// leaf size. Never deeper than the quantisation grid or 36 levels (4096 cells per cube
-/// edge), since every level costs time on every triangle.
-fn key_depth(faces: u64, bits: u32, opts: &BuildOptions) -> u8 {
+/// How deep to key triangles: `(shallow, deep)`. Leaves of a surface sit near depth
+/// `1.5 log2(N / cap)` (a surface crosses ~4^j of the 8^j cubes of octree level j, and 3
+/// tetrahedron levels make one octree level). Every triangle is first keyed 6 levels
+/// below that; only triangles in cells still over the limit there are keyed again, 12
+/// levels deeper (density contrasts of ~250x at full leaf size). Deep keys cost time on
+/// every triangle they are computed for, so most inputs never pay for them. Never deeper
+/// than the quantisation grid or 36 levels (4096 cells per cube edge).
+fn key_depths(faces: u64, bits: u32, opts: &BuildOptions) -> (u8, u8) {
     let leaves = (faces as f64 / opts.leaf_triangles as f64).max(1.0);
-    let d = (1.5 * leaves.log2()).round() as u32 + 12;
-    d.clamp(24, 36).min(3 * bits).min(MAX_LEVEL as u32) as u8
+    let limit = 36.min(3 * bits).min(MAX_LEVEL as u32);
+    let shallow = ((1.5 * leaves.log2()).round() as u32 + 6).clamp(12, 36).min(limit);
+    let deep = (shallow + 12).min(limit);
+    (shallow as u8, deep as u8)
+}
+
+/// Cells at depth `shallow` that hold more than a leaf's worth of triangles.
+fn crowded_cells(keys: &Path, faces: u64, shallow: u8, opts: &BuildOptions) -> Result<HashSet<u64>, BuildError> {
+    let chunk = chunk_faces(opts);
+    let mut counts: HashMap<u64, u64> = HashMap::new();
+    let mut r = BufReader::with_capacity(1 << 20, File::open(keys).map_err(|e| BuildError::io(keys, e))?);
+    let mut done = 0u64;
+    while done < faces {
+        let n = ((faces - done) as usize).min(chunk);
+        for key in read_chunk::<u64>(&mut r, n, keys)? {
+            *counts.entry(prefix(key, shallow)).or_default() += 1;
+        }
+        done += n as u64;
+    }
+    let cap = opts.leaf_triangles as u64;
+    Ok(counts.into_iter().filter(|&(_, c)| c > cap).map(|(p, _)| p).collect())
+}
+
+/// Re-key at `deep` the faces whose cell at depth `shallow` is in `cells`. Deeper keys
+/// extend shallower ones (same descent), so the other keys stay valid.
+#[allow(clippy::too_many_arguments)]
+fn deepen_keys(
+    imp: &Imported,
+    grid: &Grid,
+    keys: &Path,
+    shallow: u8,
+    deep: u8,
+    cells: &HashSet<u64>,
+    opts: &BuildOptions,
+    progress: &dyn Progress,
+) -> Result<(), BuildError> {
+    if deep <= shallow || cells.is_empty() {
+        return Ok(());
+    }
+    let crowded = cells;
+    let chunk = chunk_faces(opts);
+    let faces = imp.face_count;
+    progress.stage("locate (deeper)", faces);
+    let kf = std::fs::OpenOptions::new().read(true).write(true).open(keys).map_err(|e| BuildError::io(keys, e))?;
+    let fp = &imp.faces_path;
+    let ff = File::open(fp).map_err(|e| BuildError::io(fp, e))?;
+    let mut done = 0u64;
+    while done < faces {
+        let n = ((faces - done) as usize).min(chunk);
+        let mut k = vec![0u64; n];
+        kf.read_exact_at(bytemuck::cast_slice_mut(&mut k), done * 8).map_err(|e| BuildError::io(keys, e))?;
+        if k.iter().any(|&key| crowded.contains(&prefix(key, shallow))) {
+            let mut f = vec![[0u32; 3]; n];
+            ff.read_exact_at(bytemuck::cast_slice_mut(&mut f), done * 12).map_err(|e| BuildError::io(fp, e))?;
+            k.par_chunks_mut(4096).zip(f.par_chunks(4096)).for_each(|(ks, fs)| {
+                let mut loc = Locator::new(deep, 3);
+                for (key, t) in ks.iter_mut().zip(fs) {
+                    if crowded.contains(&prefix(*key, shallow)) {
+                        let q = t.map(|i| grid.quantize(imp.vertices.get(i).position));
+                        *key = loc.locate(grid.centroid3(q)).unwrap_or(*key);
+                    }
+                }
+            });
+            kf.write_all_at(bytemuck::cast_slice(&k), done * 8).map_err(|e| BuildError::io(keys, e))?;
+            imp.vertices.release();
+        }
+        done += n as u64;
+        progress.advance(n as u64);
+    }
+    progress.finish_stage();
+    Ok(())
 }
 
 /// Pass 1: one depth-first key per face.
@@ -344,8 +427,9 @@ fn route(imp: &Imported, keys: &Path, leaves: &mut Vec<Leaf>, out: &Path, opts: 
         while done < faces {
             let n = ((faces - done) as usize).min(chunk);
             let k: Vec<u64> = read_chunk(&mut r, n, keys)?;
-            for key in k {
-                counts[find(key)] += 1;
+            let ids: Vec<u32> = k.par_iter().map(|&key| find(key) as u32).collect();
+            for id in ids {
+                counts[id as usize] += 1;
             }
             done += n as u64;
             progress.advance(n as u64);
@@ -372,8 +456,8 @@ fn route(imp: &Imported, keys: &Path, leaves: &mut Vec<Leaf>, out: &Path, opts: 
         let n = ((faces - done) as usize).min(chunk);
         let k: Vec<u64> = read_chunk(&mut kr, n, keys)?;
         let f: Vec<[u32; 3]> = read_chunk(&mut fr, n, fp)?;
-        let mut order: Vec<(u32, u32)> = k.iter().enumerate().map(|(i, &key)| (find(key) as u32, i as u32)).collect();
-        order.sort_unstable();
+        let mut order: Vec<(u32, u32)> = k.par_iter().enumerate().map(|(i, &key)| (find(key) as u32, i as u32)).collect();
+        order.par_sort_unstable();
         let mut i = 0;
         while i < order.len() {
             let leaf = order[i].0 as usize;
@@ -446,6 +530,63 @@ mod tests {
             expect = e;
         }
         assert_eq!(expect, 6u64 << MAX_LEVEL);
+    }
+
+    /// A wavy grid surface, dense in one corner (so some cells crowd and need deep keys,
+    /// and the conformity closure splits cells that do not).
+    fn write_uneven_grid(path: &Path, n: u32) {
+        use tessera_mesh::{Attributes, PlyWriter, PlyWriterOptions, Vertex};
+        let opts = PlyWriterOptions {
+            attributes: Attributes::default(),
+            vertex_count: ((n + 1) * (n + 1)) as u64,
+            face_count: (2 * n * n) as u64,
+            comments: vec![],
+        };
+        let mut w = PlyWriter::create(path, &opts).unwrap();
+        for j in 0..=n {
+            for i in 0..=n {
+                // Squaring the parameter crowds vertices towards 0.
+                let (u, v) = ((i as f32 / n as f32).powi(3), (j as f32 / n as f32).powi(3));
+                let z = 0.05 * (7.0 * u).sin() * (5.0 * v).cos();
+                w.write_vertex(&Vertex { position: [u, v, z], ..Default::default() }).unwrap();
+            }
+        }
+        for j in 0..n {
+            for i in 0..n {
+                let a = j * (n + 1) + i;
+                w.write_triangle([a, a + 1, a + n + 1]).unwrap();
+                w.write_triangle([a + 1, a + n + 2, a + n + 1]).unwrap();
+            }
+        }
+        w.finish().unwrap();
+    }
+
+    #[test]
+    fn every_face_lands_in_the_leaf_holding_its_centroid() {
+        // Why: two-depth keying must route faces of cells that the conformity closure
+        // splits (but that were not crowded) to their true leaf, not the cell's first.
+        let dir = tempfile::tempdir().unwrap();
+        let input = dir.path().join("grid.ply");
+        write_uneven_grid(&input, 120);
+        let opts = BuildOptions { leaf_triangles: 64, node_triangles: 32, ..Default::default() };
+        let imp = crate::import::import(&input, dir.path(), &crate::NoProgress).unwrap();
+        let part = partition(&imp, dir.path(), &opts, &crate::NoProgress).unwrap();
+        assert!(part.leaves.len() > 50);
+        let buckets = File::open(&part.buckets).unwrap();
+        let mut total = 0;
+        let mut max_level = 0;
+        for leaf in &part.leaves {
+            let faces = read_leaf_faces(&buckets, &part.buckets, leaf).unwrap();
+            total += faces.len() as u64;
+            max_level = max_level.max(leaf.id.1);
+            for f in faces {
+                let q = f.map(|i| part.grid.quantize(imp.vertices.get(i).position));
+                let t = Tet::locate_scaled(part.grid.centroid3(q), 3, leaf.id.1).unwrap();
+                assert_eq!(tet_id(&t), leaf.id, "face {f:?} routed to the wrong leaf");
+            }
+        }
+        assert_eq!(total, imp.face_count);
+        assert!(max_level > part.key_depth.min(60) / 2, "want deep leaves, got {max_level}");
     }
 
     #[test]
