@@ -339,6 +339,7 @@ pub(crate) fn build_hierarchy(
             normal_weight: 0.5,
             color_weight: 0.5,
             has_colors: imp.attributes.colors,
+            use_normals: !imp.normals_computed,
         },
         step: part.grid.step(),
     };
@@ -351,12 +352,14 @@ pub(crate) fn build_hierarchy(
         }
         // Deterministic order of work (results do not depend on it, ids do).
         diamonds.sort_by_key(|d| (d[0].root, d[0].path));
+        let t = std::time::Instant::now();
         diamonds.par_iter().try_for_each(|d| {
             let r = ctx.process_diamond(d);
             progress.advance(1);
             r
         })?;
         imp.vertices.release();
+        tracing::info!(level, diamonds = diamonds.len(), seconds = t.elapsed().as_secs_f64(), "diamond level done");
     }
     progress.finish_stage();
     // Roots: encode (no morph targets); unsplit roots are leaves.

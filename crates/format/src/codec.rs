@@ -31,7 +31,7 @@ const ATTR_ALL: u32 = ATTR_NORMALS | ATTR_COLORS | ATTR_UVS;
 const VERTEX_CODEC_VERSION: i32 = 1;
 const VERTEX_CODEC_LEVEL: i32 = 3;
 /// zstd level for the section payload.
-const ZSTD_LEVEL: i32 = 9;
+const ZSTD_LEVEL: i32 = 5;
 
 /// Section order in the payload (and in the header's length table).
 const SEC_INDICES: usize = 0;
