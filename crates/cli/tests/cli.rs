@@ -453,3 +453,38 @@ fn extract_help_documents_the_criteria() {
 /// Silence the unused-import lint for helpers only some tests use.
 #[allow(dead_code)]
 fn _uses(_: &Model) {}
+
+/// A build killed mid-way (SIGKILL: no destructor runs) leaves nothing at the output
+/// path: the model is written to a temporary file and renamed only when complete.
+#[test]
+fn killed_build_leaves_no_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("sphere.ply");
+    tessera_gen::write_sphere(&input, &tessera_gen::SphereOptions { triangles: 600_000, ..Default::default() }).unwrap();
+    let output = dir.path().join("model.tsr");
+    let mut killed_while_running = 0;
+    for delay_ms in [50u64, 300, 900, 1500] {
+        let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_tessera"))
+            .args(["build", "-q"])
+            .arg(&input)
+            .arg("-o")
+            .arg(&output)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(delay_ms));
+        if child.try_wait().unwrap().is_none() {
+            killed_while_running += 1;
+            child.kill().unwrap();
+            child.wait().unwrap();
+            assert!(!output.exists(), "a build killed after {delay_ms} ms left {}", output.display());
+            // (Hidden temporary files may remain after SIGKILL; a later build in the
+            // same directory does not mistake them for anything.)
+        } else {
+            child.wait().unwrap();
+            std::fs::remove_file(&output).ok();
+        }
+    }
+    assert!(killed_while_running >= 2, "the build finished too fast to be killed mid-way");
+}
