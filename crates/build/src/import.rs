@@ -202,12 +202,7 @@ fn release_mut(map: &MmapMut) {
 fn compute_normals(vpath: &Path, fpath: &Path, faces: u64, progress: &dyn Progress) -> Result<(), BuildError> {
     let Some(mut map) = map_mut(vpath)? else { return Ok(()) };
     progress.stage("normals", faces);
-    {
-        let verts: &mut [StoredVertex] = bytemuck::cast_slice_mut(&mut map[..]);
-        for v in verts.iter_mut() {
-            v.normal = [0.0; 3];
-        }
-    }
+    // The store's normals are zero already: the importer writes zero for absent normals.
     let mut reader = BufReader::with_capacity(1 << 20, File::open(fpath).map_err(|e| BuildError::io(fpath, e))?);
     let mut buf = vec![0u8; 12 << 16];
     let mut done = 0u64;
@@ -232,16 +227,30 @@ fn compute_normals(vpath: &Path, fpath: &Path, faces: u64, progress: &dyn Progre
             release_mut(&map);
         }
     }
-    normalise(bytemuck::cast_slice_mut(&mut map[..]));
+    normalise_released(&mut map);
     map.flush().map_err(|e| BuildError::io(vpath, e))?;
     release_mut(&map);
     progress.finish_stage();
     Ok(())
 }
 
+/// Normalise every stored normal, 64 MiB of the map at a time, releasing the pages in
+/// between (touching the whole store at once would make it all resident).
+fn normalise_released(map: &mut MmapMut) {
+    const SLAB: usize = 36 << 21; // 2M vertices, 72 MiB
+    let len = map.len() - map.len() % 36;
+    let mut at = 0;
+    while at < len {
+        let end = (at + SLAB).min(len);
+        normalise(bytemuck::cast_slice_mut(&mut map[at..end]));
+        at = end;
+        release_mut(map);
+    }
+}
+
 fn normalise_given_normals(vpath: &Path) -> Result<(), BuildError> {
     let Some(mut map) = map_mut(vpath)? else { return Ok(()) };
-    normalise(bytemuck::cast_slice_mut(&mut map[..]));
+    normalise_released(&mut map);
     map.flush().map_err(|e| BuildError::io(vpath, e))?;
     release_mut(&map);
     Ok(())

@@ -143,6 +143,14 @@ impl BuildReport {
     }
 }
 
+/// Peak resident set size so far in MiB (Linux; 0 elsewhere), for stage logs.
+pub(crate) fn peak_rss_mib() -> u64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| s.lines().find(|l| l.starts_with("VmHWM:")).and_then(|l| l.split_whitespace().nth(1)?.parse::<u64>().ok()))
+        .map_or(0, |kb| kb / 1024)
+}
+
 /// Build `output` from the mesh at `input`. Writes atomically: on any error nothing is
 /// left at `output` (a file already there stays as it was).
 pub fn build(input: &Path, output: &Path, opts: &BuildOptions, progress: &dyn Progress) -> Result<BuildReport, BuildError> {
@@ -178,6 +186,7 @@ fn build_in_pool(input: &Path, output: &Path, opts: &BuildOptions, progress: &dy
     let mut t = Instant::now();
     let mut lap = |name: &str, report: &mut BuildReport| {
         report.stage_seconds.push((name.to_string(), t.elapsed().as_secs_f64()));
+        tracing::info!(stage = name, seconds = t.elapsed().as_secs_f64(), peak_rss_mib = peak_rss_mib(), "stage done");
         t = Instant::now();
     };
     let imported = import::import(input, tmp.path(), progress)?;

@@ -150,7 +150,7 @@ pub fn partition(imp: &Imported, tmp: &Path, opts: &BuildOptions, progress: &dyn
     let crowded = crowded_cells(&keys_path, imp.face_count, shallow, opts)?;
     let key_depth = if crowded.is_empty() { shallow } else { deep };
     deepen_keys(imp, &grid, &keys_path, shallow, deep, &crowded, opts, progress)?;
-    tracing::info!(seconds = t.elapsed().as_secs_f64(), shallow, key_depth, "partition: keys");
+    tracing::info!(seconds = t.elapsed().as_secs_f64(), shallow, key_depth, peak_rss_mib = crate::peak_rss_mib(), "partition: keys");
     let t = std::time::Instant::now();
     let split = choose_splits(&keys_path, imp.face_count, key_depth, opts, progress)?;
     // The conformity closure can split cells below `shallow` that were not crowded; their
@@ -162,12 +162,12 @@ pub fn partition(imp: &Imported, tmp: &Path, opts: &BuildOptions, progress: &dyn
         .filter(|c| !crowded.contains(c))
         .collect();
     deepen_keys(imp, &grid, &keys_path, shallow, deep, &closure_cells, opts, progress)?;
-    tracing::info!(seconds = t.elapsed().as_secs_f64(), splits = split.len(), "partition: counts and closure");
+    tracing::info!(seconds = t.elapsed().as_secs_f64(), splits = split.len(), peak_rss_mib = crate::peak_rss_mib(), "partition: counts and closure");
     let t = std::time::Instant::now();
     let mut leaves = leaves_of(&split);
     let buckets = tmp.join("buckets.bin");
     let oversized = route(imp, &keys_path, &mut leaves, &buckets, opts, progress)?;
-    tracing::info!(seconds = t.elapsed().as_secs_f64(), leaves = leaves.len(), "partition: routing");
+    tracing::info!(seconds = t.elapsed().as_secs_f64(), leaves = leaves.len(), peak_rss_mib = crate::peak_rss_mib(), "partition: routing");
     let _ = std::fs::remove_file(&keys_path);
     Ok(Partition { grid, split, leaves, buckets, oversized_leaves: oversized, key_depth, mean_edge })
 }
