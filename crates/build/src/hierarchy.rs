@@ -65,8 +65,9 @@ struct Ctx<'a> {
 }
 
 /// Leaf vertices read from the memory-mapped vertex store between two releases of its
-/// resident pages (~1M vertices touch at most ~36 MB of the store, usually far less).
-const RELEASE_EVERY_VERTICES: u64 = 1 << 20;
+/// resident pages (each fault maps up to 16 neighbouring cached pages, so 128k scattered
+/// vertices can hold a few hundred MiB resident).
+const RELEASE_EVERY_VERTICES: u64 = 1 << 17;
 
 /// Below this many triangles a patch is not reduced further: tiny patches cost more in
 /// per-node overhead (draw calls, records) than they save.

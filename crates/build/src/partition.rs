@@ -123,9 +123,19 @@ fn mean_edge_length(imp: &Imported) -> Result<f64, BuildError> {
         }
         n += 3;
         f += stride;
+        // Samples are spread over the whole store: without releasing, nearly every page
+        // of it would end up resident.
+        if n % (3 << 12) == 0 {
+            imp.vertices.release();
+        }
     }
+    imp.vertices.release();
     Ok(if n > 0 { sum / n as f64 } else { 0.0 })
 }
+
+/// Faces per chunk in passes that read the memory-mapped vertex store: small enough that
+/// the pages touched between two releases stay at a few tens of MiB.
+const VERTEX_PASS_FACES: usize = 1 << 18;
 
 /// Faces processed per chunk; bounded memory whatever the input size.
 fn chunk_faces(opts: &BuildOptions) -> usize {
@@ -221,7 +231,7 @@ fn deepen_keys(
         return Ok(());
     }
     let crowded = cells;
-    let chunk = chunk_faces(opts);
+    let chunk = chunk_faces(opts).min(VERTEX_PASS_FACES);
     let faces = imp.face_count;
     progress.stage("locate (deeper)", faces);
     let kf = std::fs::OpenOptions::new().read(true).write(true).open(keys).map_err(|e| BuildError::io(keys, e))?;
@@ -260,7 +270,9 @@ fn write_keys(imp: &Imported, grid: &Grid, depth: u8, out: &Path, opts: &BuildOp
     let fp = &imp.faces_path;
     let mut faces = BufReader::with_capacity(1 << 20, File::open(fp).map_err(|e| BuildError::io(fp, e))?);
     let mut keys = BufWriter::with_capacity(1 << 20, File::create(out).map_err(|e| BuildError::io(out, e))?);
-    let chunk = chunk_faces(opts);
+    // Small chunks: the vertex store's pages are released after each (see
+    // `VertexStore::release`), and each fault maps up to 16 neighbouring pages.
+    let chunk = chunk_faces(opts).min(VERTEX_PASS_FACES);
     let mut done = 0u64;
     while done < imp.face_count {
         let n = ((imp.face_count - done) as usize).min(chunk);
