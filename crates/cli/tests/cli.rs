@@ -458,13 +458,13 @@ fn _uses(_: &Model) {}
 /// path: the model is written to a temporary file and renamed only when complete.
 #[test]
 fn killed_build_leaves_no_output() {
+    use std::os::unix::process::ExitStatusExt;
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("sphere.ply");
     tessera_gen::write_sphere(&input, &tessera_gen::SphereOptions { triangles: 600_000, ..Default::default() }).unwrap();
     let output = dir.path().join("model.tsr");
-    let mut killed_while_running = 0;
-    for delay_ms in [50u64, 300, 900, 1500] {
-        let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_tessera"))
+    let spawn = || {
+        std::process::Command::new(env!("CARGO_BIN_EXE_tessera"))
             .args(["build", "-q"])
             .arg(&input)
             .arg("-o")
@@ -472,19 +472,29 @@ fn killed_build_leaves_no_output() {
             .stdout(std::process::Stdio::null())
             .stderr(std::process::Stdio::null())
             .spawn()
-            .unwrap();
-        std::thread::sleep(std::time::Duration::from_millis(delay_ms));
-        if child.try_wait().unwrap().is_none() {
-            killed_while_running += 1;
-            child.kill().unwrap();
-            child.wait().unwrap();
-            assert!(!output.exists(), "a build killed after {delay_ms} ms left {}", output.display());
-            // (Hidden temporary files may remain after SIGKILL; a later build in the
-            // same directory does not mistake them for anything.)
+            .unwrap()
+    };
+    // Time one whole build, then kill others at fractions of that time (import,
+    // partition, hierarchy, write).
+    let t = std::time::Instant::now();
+    assert!(spawn().wait().unwrap().success());
+    let full = t.elapsed();
+    std::fs::remove_file(&output).unwrap();
+    let mut killed = 0;
+    for fraction in [0.1, 0.35, 0.6, 0.85] {
+        let mut child = spawn();
+        std::thread::sleep(full.mul_f64(fraction));
+        child.kill().ok();
+        let status = child.wait().unwrap();
+        if status.signal().is_some() {
+            killed += 1;
+            assert!(!output.exists(), "a build killed at {:.0}% of its run left {}", fraction * 100.0, output.display());
         } else {
-            child.wait().unwrap();
+            // It finished before the signal arrived: a complete model is fine.
             std::fs::remove_file(&output).ok();
         }
+        // (Hidden temporary files may remain after SIGKILL; a later build in the same
+        // directory does not mistake them for anything.)
     }
-    assert!(killed_while_running >= 2, "the build finished too fast to be killed mid-way");
+    assert!(killed >= 2, "the builds finished before they could be killed");
 }
