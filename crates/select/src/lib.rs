@@ -9,6 +9,9 @@
 //!   and frustum in a model's local frame.
 //! - [`select`]: the stateless top-down traversal of ATP section 4 ([`select_cut`]) with
 //!   frustum, backface and screen-space-error decisions; uniform level cuts.
+//! - [`residency`]: residency-aware selection that never waits ([`select_resident`]),
+//!   prefetch ([`prefetch_set`], [`predict_camera`]) and eviction with hysteresis
+//!   ([`should_unload`]) on a compact [`NodeView`] of the node table.
 //! - [`merge`]: welding the decoded patches of a cut into one mesh ([`merge_patches`]).
 //! - [`edges`]: edge-use counts of a mesh ([`edge_report`]), the crack detector.
 
@@ -16,11 +19,16 @@ pub mod camera;
 pub mod edges;
 mod hash;
 pub mod merge;
+pub mod residency;
 pub mod select;
 
 pub use camera::{Camera, CameraError, CameraErrorKind, Frustum, Orbit, ViewBasis, CAMERA_FIELDS};
 pub use edges::{edge_report, EdgeReport};
 pub use merge::{merge_patches, CutMesh, PatchRef};
+pub use residency::{
+    predict_camera, prefetch_set, select_resident, should_unload, HotNode, NodeView,
+    PrefetchOptions, Selection,
+};
 pub use select::{
     closest_distance, is_backfacing, is_leaf, needs_refinement, select_cut, select_cut_into,
     traverse_into, uniform_level_cut, Criterion, Cut, Decision, ViewParams,

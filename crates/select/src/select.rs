@@ -138,6 +138,10 @@ pub struct ViewParams {
     /// `projection_scale_px / tolerance_px`: multiply a model-space error by it and
     /// compare with a distance (see [`needs_refinement`]). Infinite for tolerance <= 0.
     pub error_scale: f32,
+    /// `projection_scale_px`: pixels covered by one model unit at distance one, so a
+    /// model-space error `e` at distance `d` projects to `e * px_per_unit / d` pixels
+    /// (priorities of the residency-aware traversal, [`crate::residency`]).
+    pub px_per_unit: f32,
     /// Whether [`ViewParams::decide`] culls.
     pub cull: bool,
 }
@@ -155,6 +159,7 @@ impl ViewParams {
             eye: camera.eye_local(cube_origin),
             frustum: camera.frustum_local(cube_origin),
             error_scale,
+            px_per_unit: scale as f32,
             cull,
         }
     }
