@@ -9,7 +9,10 @@ use proptest::prelude::*;
 use tessera_format::{Header, NodeRecord, NO_NODE};
 
 use crate::select::tests::{assert_at_most_once, assert_covers_once};
-use crate::{select_cut, Camera, Criterion, ViewParams};
+use crate::{
+    prefetch_set, select_cut, select_resident, should_unload, Camera, Criterion, NodeView,
+    PrefetchOptions, Selection, ViewParams,
+};
 
 /// splitmix64: a deterministic stream from the proptest-chosen seed.
 struct Rng(u64);
@@ -228,6 +231,70 @@ proptest! {
                 prop_assert!(!p.needs_refinement(&nodes[c as usize]),
                     "node {} is fine but its child {} wants refinement", i, c);
             }
+        }
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(200))]
+
+    /// With everything resident the residency-aware traversal (plane masking included)
+    /// draws exactly `select_cut`'s cut; with a random resident set it draws only
+    /// resident nodes, never two on one root-leaf path, and asks only for missing ones.
+    #[test]
+    fn select_resident_matches_select_cut_and_respects_residency(
+        seed in any::<u64>(),
+        camera in camera_strategy(),
+        tolerance_px in 0.05f32..50.0,
+        cull in any::<bool>(),
+        keep in 0u64..8,
+    ) {
+        let Some(camera) = camera else { return Ok(()); };
+        let (h, nodes) = random_forest(seed, 400);
+        let nv = NodeView::new(&h, &nodes);
+        let view = ViewParams::new(&camera, h.cube_origin, tolerance_px, cull);
+        let mut sel = Selection::default();
+        select_resident(&nv, &view, &|_| true, &mut sel);
+        let cut = select_cut(&h, &nodes, &Criterion::View { camera, tolerance_px, cull });
+        prop_assert_eq!(&sel.draw, &cut.nodes);
+        prop_assert!(sel.missing.is_empty());
+        // Pseudo-random residency: roughly keep/8 of the nodes missing.
+        let resident = |i: u32| (u64::from(i).wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ seed) % 8 >= keep;
+        select_resident(&nv, &view, &resident, &mut sel);
+        assert_at_most_once(&h, &nodes, &sel.draw, false);
+        for &i in &sel.draw {
+            prop_assert!(resident(i));
+        }
+        for &(i, p) in &sel.missing {
+            prop_assert!(!resident(i) && p >= 0.0);
+        }
+    }
+
+    /// Nothing the current view needs, and nothing in the prefetch set of the current
+    /// camera, is unloadable with a larger growth.
+    #[test]
+    fn prefetch_and_unload_thresholds_nest(
+        seed in any::<u64>(),
+        camera in camera_strategy(),
+        tolerance_px in 0.05f32..50.0,
+        cull in any::<bool>(),
+        growth in 1.0f32..3.0,
+        extra in 0.0f32..2.0,
+    ) {
+        let Some(camera) = camera else { return Ok(()); };
+        let (h, nodes) = random_forest(seed, 400);
+        let nv = NodeView::new(&h, &nodes);
+        let view = ViewParams::new(&camera, h.cube_origin, tolerance_px, cull);
+        let mut sel = Selection::default();
+        select_resident(&nv, &view, &|_| true, &mut sel);
+        let mut pre = Vec::new();
+        prefetch_set(&nv, &view, &PrefetchOptions { sphere_growth: growth, predicted: None }, &mut pre);
+        for &(i, _) in &pre {
+            prop_assert!(!sel.draw.contains(&i));
+            prop_assert!(!should_unload(&nv, i, &view, growth + extra), "prefetched {} unloadable", i);
+        }
+        for &i in &sel.draw {
+            prop_assert!(!should_unload(&nv, i, &view, growth + extra), "drawn {} unloadable", i);
         }
     }
 }

@@ -320,13 +320,13 @@ pub(crate) mod tests {
     use super::*;
     use bytemuck::Zeroable;
 
-    fn header(root_count: u32) -> Header {
+    pub(crate) fn header(root_count: u32) -> Header {
         let mut h = Header::zeroed();
         h.root_count = root_count;
         h
     }
 
-    fn node(
+    pub(crate) fn node(
         level: u8,
         children: [u32; 2],
         error: f32,
@@ -347,14 +347,14 @@ pub(crate) mod tests {
         }
     }
 
-    const N: u32 = NO_NODE;
+    pub(crate) const N: u32 = NO_NODE;
 
     /// Two roots along the x axis, in the plane z = 0.
     /// Root A (0) spans x in [0, 8]: children 2 and 3 (a diamond, error 2), each with two
     /// leaf children 5, 6 and 7, 8. Root B (1) spans x in [10, 14], error 1, with one
     /// existing child (4, a leaf): the other child tetrahedron held no triangles.
     /// Saturated spheres are nested; the tight spheres equal them.
-    fn hierarchy() -> (Header, Vec<NodeRecord>) {
+    pub(crate) fn hierarchy() -> (Header, Vec<NodeRecord>) {
         let nodes = vec![
             node(0, [2, 3], 4.0, [4.0, 0.0, 0.0], 4.5, 1000),
             node(0, [4, N], 1.0, [12.0, 0.0, 0.0], 2.5, 2000),
@@ -369,7 +369,7 @@ pub(crate) mod tests {
         (header(2), nodes)
     }
 
-    fn cam(position: [f64; 3], target: [f64; 3], fov_y_deg: f64, height: u32) -> Camera {
+    pub(crate) fn cam(position: [f64; 3], target: [f64; 3], fov_y_deg: f64, height: u32) -> Camera {
         Camera::new(position, target, [0.0, 1.0, 0.0], fov_y_deg, height, height).unwrap()
     }
 
