@@ -355,6 +355,9 @@ pub(crate) fn build_hierarchy(
         diamonds.sort_by_key(|d| (d[0].root, d[0].path));
         let t = std::time::Instant::now();
         diamonds.par_iter().try_for_each(|d| {
+            if progress.cancelled() {
+                return Err(BuildError::Interrupted);
+            }
             let r = ctx.process_diamond(d);
             progress.advance(1);
             r

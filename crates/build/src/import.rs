@@ -131,6 +131,9 @@ impl MeshVisitor for Sink<'_> {
         self.face_count += 1;
         if self.face_count % (1 << 20) == 0 {
             self.progress.advance(1 << 20);
+            if self.progress.cancelled() {
+                return Err(MeshError::Visitor("interrupted".into()));
+            }
         }
         Ok(())
     }

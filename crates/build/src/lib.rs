@@ -70,6 +70,11 @@ pub trait Progress: Sync {
     fn advance(&self, n: u64);
     /// The current stage is done.
     fn finish_stage(&self);
+    /// Whether the user asked to stop (e.g. Ctrl-C). The builder checks it between units
+    /// of work and returns [`BuildError::Interrupted`], so temporary files are removed.
+    fn cancelled(&self) -> bool {
+        false
+    }
 }
 
 /// A [`Progress`] that reports nothing.
@@ -95,6 +100,8 @@ pub enum BuildError {
     Options(String),
     #[error("internal error: {0}")]
     Internal(String),
+    #[error("interrupted")]
+    Interrupted,
 }
 
 impl BuildError {
@@ -189,13 +196,16 @@ fn build_in_pool(input: &Path, output: &Path, opts: &BuildOptions, progress: &dy
         tracing::info!(stage = name, seconds = t.elapsed().as_secs_f64(), peak_rss_mib = peak_rss_mib(), "stage done");
         t = Instant::now();
     };
+    let check = || if progress.cancelled() { Err(BuildError::Interrupted) } else { Ok(()) };
     let imported = import::import(input, tmp.path(), progress)?;
+    check()?;
     report.input_vertices = imported.vertex_count;
     report.input_triangles = imported.face_count;
     report.import = imported.report.clone();
     report.normals_computed = imported.normals_computed;
     lap("import", &mut report);
     let part = partition::partition(&imported, tmp.path(), opts, progress)?;
+    check()?;
     report.oversized_leaves = part.oversized_leaves;
     lap("partition", &mut report);
     hierarchy::build_hierarchy(&imported, &part, tmp.path(), output, opts, progress, &mut report)?;

@@ -259,6 +259,9 @@ fn deepen_keys(
         }
         done += n as u64;
         progress.advance(n as u64);
+        if progress.cancelled() {
+            return Err(BuildError::Interrupted);
+        }
     }
     progress.finish_stage();
     Ok(())
@@ -295,6 +298,9 @@ fn write_keys(imp: &Imported, grid: &Grid, depth: u8, out: &Path, opts: &BuildOp
         keys.write_all(bytemuck::cast_slice(&k)).map_err(|e| BuildError::io(out, e))?;
         done += n as u64;
         progress.advance(n as u64);
+        if progress.cancelled() {
+            return Err(BuildError::Interrupted);
+        }
         imp.vertices.release();
     }
     keys.into_inner().map_err(|e| BuildError::io(out, e.into_error()))?;
@@ -342,6 +348,9 @@ fn choose_splits(keys: &Path, faces: u64, depth: u8, opts: &BuildOptions, progre
             }
             done += n as u64;
             progress.advance(n as u64);
+            if progress.cancelled() {
+                return Err(BuildError::Interrupted);
+            }
         }
         progress.finish_stage();
         // Aggregate upwards within the band; nodes over the cap must split.
@@ -445,6 +454,9 @@ fn route(imp: &Imported, keys: &Path, leaves: &mut Vec<Leaf>, out: &Path, opts: 
             }
             done += n as u64;
             progress.advance(n as u64);
+            if progress.cancelled() {
+                return Err(BuildError::Interrupted);
+            }
         }
     }
     progress.finish_stage();
@@ -483,6 +495,9 @@ fn route(imp: &Imported, keys: &Path, leaves: &mut Vec<Leaf>, out: &Path, opts: 
         }
         done += n as u64;
         progress.advance(n as u64);
+        if progress.cancelled() {
+            return Err(BuildError::Interrupted);
+        }
     }
     progress.finish_stage();
     let cap = opts.leaf_triangles as u64;

@@ -51,6 +51,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         tmp_dir: a.tmp_dir,
     };
     let bars = Bars::new(a.quiet || a.json);
+    crate::progress::install_interrupt_handler();
     let r = build(&a.input, &a.output, &opts, &bars).with_context(|| format!("building {}", a.output.display()))?;
     if a.json {
         println!("{}", serde_json::to_string_pretty(&report_json(&r))?);

@@ -2,8 +2,30 @@
 //! is not a terminal, so logs and CI output stay clean).
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Mutex;
 use tessera_build::Progress;
+
+/// Set by the first Ctrl-C (SIGINT/SIGTERM); the libraries poll it through
+/// `Progress::cancelled` and unwind, removing their temporary files.
+static INTERRUPTED: AtomicBool = AtomicBool::new(false);
+
+extern "C" fn on_signal(_: libc::c_int) {
+    if INTERRUPTED.swap(true, Ordering::SeqCst) {
+        // A second Ctrl-C: stop at once (async-signal-safe exit).
+        unsafe { libc::_exit(130) };
+    }
+}
+
+/// Route SIGINT and SIGTERM to a graceful stop (the first one) of long commands.
+pub fn install_interrupt_handler() {
+    let handler = on_signal as extern "C" fn(libc::c_int) as libc::sighandler_t;
+    // SAFETY: the handler only touches an atomic and calls `_exit`.
+    unsafe {
+        libc::signal(libc::SIGINT, handler);
+        libc::signal(libc::SIGTERM, handler);
+    }
+}
 
 pub struct Bars {
     bar: Mutex<Option<ProgressBar>>,
@@ -40,6 +62,9 @@ impl Progress for Bars {
                 bar.inc(n);
             }
         }
+    }
+    fn cancelled(&self) -> bool {
+        INTERRUPTED.load(Ordering::Relaxed)
     }
     fn finish_stage(&self) {
         if let Ok(mut b) = self.bar.lock() {

@@ -498,3 +498,52 @@ fn killed_build_leaves_no_output() {
     }
     assert!(killed >= 2, "the builds finished before they could be killed");
 }
+
+/// Ctrl-C (SIGINT) stops a build cleanly: an `interrupted` error, a non-zero exit, nothing
+/// at the output path and no temporary directory left beside it.
+#[test]
+fn interrupted_build_cleans_up() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("sphere.ply");
+    tessera_gen::write_sphere(&input, &tessera_gen::SphereOptions { triangles: 600_000, ..Default::default() }).unwrap();
+    let output = dir.path().join("model.tsr");
+    let spawn = || {
+        std::process::Command::new(env!("CARGO_BIN_EXE_tessera"))
+            .args(["build", "-q"])
+            .arg(&input)
+            .arg("-o")
+            .arg(&output)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap()
+    };
+    let t = std::time::Instant::now();
+    assert!(spawn().wait().unwrap().success());
+    let full = t.elapsed();
+    std::fs::remove_file(&output).unwrap();
+    let mut interrupted = 0;
+    for fraction in [0.2, 0.5, 0.8] {
+        let child = spawn();
+        std::thread::sleep(full.mul_f64(fraction));
+        // SAFETY: plain kill(2) on our own child.
+        unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGINT) };
+        let out = child.wait_with_output().unwrap();
+        if out.status.success() {
+            std::fs::remove_file(&output).ok(); // finished before the signal
+            continue;
+        }
+        interrupted += 1;
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains("interrupted"), "unexpected message: {err}");
+        assert!(!output.exists());
+        let left: Vec<String> = std::fs::read_dir(dir.path())
+            .unwrap()
+            .filter_map(|e| e.ok())
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .filter(|n| n.starts_with('.'))
+            .collect();
+        assert!(left.is_empty(), "temporary files left after Ctrl-C: {left:?}");
+    }
+    assert!(interrupted >= 2, "the builds finished before the signal");
+}
