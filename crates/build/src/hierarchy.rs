@@ -366,16 +366,10 @@ pub(crate) fn build_hierarchy(
         tracing::info!(level, diamonds = diamonds.len(), seconds = t.elapsed().as_secs_f64(), "diamond level done");
     }
     progress.finish_stage();
-    // Roots: encode (no morph targets); unsplit roots are leaves.
+    // Roots: encode (no morph targets); unsplit roots are leaves, loaded here.
     for r in 0..6u8 {
         let id = (r, 0u8, 0u64);
-        if let Some(leaf) = ctx.leaf_of.get(&id) {
-            let p = ctx.load_leaf(leaf)?;
-            let info = ctx.leaf_info(id, &p);
-            ctx.nodes.lock().map_err(|_| ctx.internal_err("poisoned"))?.insert(id, info);
-            ctx.emit(id, &p, Vec::new())?;
-        } else if ctx.internal.contains(&id) {
-            let p = ctx.load_child(id)?.ok_or_else(|| ctx.internal_err("root patch missing"))?;
+        if let Some(p) = ctx.load_child(id)? {
             ctx.emit(id, &p, Vec::new())?;
         }
     }

@@ -150,12 +150,17 @@ impl BuildReport {
     }
 }
 
-/// Peak resident set size so far in MiB (Linux; 0 elsewhere), for stage logs.
+/// Peak resident set size of this process so far in bytes (Linux `VmHWM`; `None`
+/// elsewhere). Stage logs and the CLI's report use it.
+pub fn peak_rss_bytes() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
+}
+
 pub(crate) fn peak_rss_mib() -> u64 {
-    std::fs::read_to_string("/proc/self/status")
-        .ok()
-        .and_then(|s| s.lines().find(|l| l.starts_with("VmHWM:")).and_then(|l| l.split_whitespace().nth(1)?.parse::<u64>().ok()))
-        .map_or(0, |kb| kb / 1024)
+    peak_rss_bytes().map_or(0, |b| b >> 20)
 }
 
 /// Build `output` from the mesh at `input`. Writes atomically: on any error nothing is

@@ -61,17 +61,9 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// Peak resident set size of this process in bytes (Linux: VmHWM), if known.
-pub fn peak_rss_bytes() -> Option<u64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kb * 1024)
-}
-
 pub fn report_json(r: &BuildReport) -> serde_json::Value {
     json!({
-        "peak_rss_bytes": peak_rss_bytes(),
+        "peak_rss_bytes": tessera_build::peak_rss_bytes(),
         "input_vertices": r.input_vertices,
         "input_triangles": r.input_triangles,
         "normals_computed": r.normals_computed,
@@ -109,7 +101,7 @@ fn print_report(out: &std::path::Path, r: &BuildReport) {
     );
     println!("  coarsest error {:.4e} (model units)", r.max_error);
     println!("  time         {:.2} s, {:.0} input triangles/s", r.seconds, r.triangles_per_second());
-    if let Some(rss) = peak_rss_bytes() {
+    if let Some(rss) = tessera_build::peak_rss_bytes() {
         println!("  peak RSS     {:.1} MiB", rss as f64 / (1 << 20) as f64);
     }
     for (n, s) in &r.stage_seconds {

@@ -454,35 +454,43 @@ fn extract_help_documents_the_criteria() {
 #[allow(dead_code)]
 fn _uses(_: &Model) {}
 
+/// A 600k-triangle sphere in a temporary directory, the output path beside it, and the
+/// time one whole `tessera build` of it takes (the model it wrote is removed), so tests
+/// can interrupt builds at fractions of that time (import, partition, hierarchy, write).
+fn timed_build_fixture() -> (tempfile::TempDir, PathBuf, PathBuf, std::time::Duration) {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("sphere.ply");
+    tessera_gen::write_sphere(&input, &tessera_gen::SphereOptions { triangles: 600_000, ..Default::default() }).unwrap();
+    let output = dir.path().join("model.tsr");
+    let t = std::time::Instant::now();
+    assert!(spawn_build(&input, &output).wait().unwrap().success());
+    let full = t.elapsed();
+    std::fs::remove_file(&output).unwrap();
+    (dir, input, output, full)
+}
+
+/// `tessera build -q INPUT -o OUTPUT` as a child process, stderr captured.
+fn spawn_build(input: &Path, output: &Path) -> std::process::Child {
+    std::process::Command::new(env!("CARGO_BIN_EXE_tessera"))
+        .args(["build", "-q"])
+        .arg(input)
+        .arg("-o")
+        .arg(output)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap()
+}
+
 /// A build killed mid-way (SIGKILL: no destructor runs) leaves nothing at the output
 /// path: the model is written to a temporary file and renamed only when complete.
 #[test]
 fn killed_build_leaves_no_output() {
     use std::os::unix::process::ExitStatusExt;
-    let dir = tempfile::tempdir().unwrap();
-    let input = dir.path().join("sphere.ply");
-    tessera_gen::write_sphere(&input, &tessera_gen::SphereOptions { triangles: 600_000, ..Default::default() }).unwrap();
-    let output = dir.path().join("model.tsr");
-    let spawn = || {
-        std::process::Command::new(env!("CARGO_BIN_EXE_tessera"))
-            .args(["build", "-q"])
-            .arg(&input)
-            .arg("-o")
-            .arg(&output)
-            .stdout(std::process::Stdio::null())
-            .stderr(std::process::Stdio::null())
-            .spawn()
-            .unwrap()
-    };
-    // Time one whole build, then kill others at fractions of that time (import,
-    // partition, hierarchy, write).
-    let t = std::time::Instant::now();
-    assert!(spawn().wait().unwrap().success());
-    let full = t.elapsed();
-    std::fs::remove_file(&output).unwrap();
+    let (_dir, input, output, full) = timed_build_fixture();
     let mut killed = 0;
     for fraction in [0.1, 0.35, 0.6, 0.85] {
-        let mut child = spawn();
+        let mut child = spawn_build(&input, &output);
         std::thread::sleep(full.mul_f64(fraction));
         child.kill().ok();
         let status = child.wait().unwrap();
@@ -503,28 +511,10 @@ fn killed_build_leaves_no_output() {
 /// at the output path and no temporary directory left beside it.
 #[test]
 fn interrupted_build_cleans_up() {
-    let dir = tempfile::tempdir().unwrap();
-    let input = dir.path().join("sphere.ply");
-    tessera_gen::write_sphere(&input, &tessera_gen::SphereOptions { triangles: 600_000, ..Default::default() }).unwrap();
-    let output = dir.path().join("model.tsr");
-    let spawn = || {
-        std::process::Command::new(env!("CARGO_BIN_EXE_tessera"))
-            .args(["build", "-q"])
-            .arg(&input)
-            .arg("-o")
-            .arg(&output)
-            .stdout(std::process::Stdio::null())
-            .stderr(std::process::Stdio::piped())
-            .spawn()
-            .unwrap()
-    };
-    let t = std::time::Instant::now();
-    assert!(spawn().wait().unwrap().success());
-    let full = t.elapsed();
-    std::fs::remove_file(&output).unwrap();
+    let (dir, input, output, full) = timed_build_fixture();
     let mut interrupted = 0;
     for fraction in [0.2, 0.5, 0.8] {
-        let child = spawn();
+        let child = spawn_build(&input, &output);
         std::thread::sleep(full.mul_f64(fraction));
         // SAFETY: plain kill(2) on our own child.
         unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGINT) };
