@@ -36,9 +36,16 @@ impl Sphere {
         if !any {
             return Sphere::default();
         }
-        let center = [(lo[0] + hi[0]) * 0.5, (lo[1] + hi[1]) * 0.5, (lo[2] + hi[2]) * 0.5];
+        let center = [
+            (lo[0] + hi[0]) * 0.5,
+            (lo[1] + hi[1]) * 0.5,
+            (lo[2] + hi[2]) * 0.5,
+        ];
         let r2 = points.map(|p| dist2(p, center)).fold(0.0, f64::max);
-        Sphere { center, radius: r2.sqrt() }
+        Sphere {
+            center,
+            radius: r2.sqrt(),
+        }
     }
 
     /// A sphere that contains every ball in `balls`: the smaller of two enclosing balls,
@@ -47,7 +54,9 @@ impl Sphere {
     /// for elongated sets.)
     pub fn of_balls(balls: &[Sphere]) -> Sphere {
         let mut it = balls.iter();
-        let Some(first) = it.next() else { return Sphere::default() };
+        let Some(first) = it.next() else {
+            return Sphere::default();
+        };
         let mut grown = *first;
         for b in it {
             grown = grown.grow_to(b);
@@ -61,7 +70,10 @@ impl Sphere {
             }
         }
         let center = std::array::from_fn(|i| (lo[i] + hi[i]) * 0.5);
-        let radius = balls.iter().map(|b| dist2(b.center, center).sqrt() + b.radius).fold(0.0, f64::max);
+        let radius = balls
+            .iter()
+            .map(|b| dist2(b.center, center).sqrt() + b.radius)
+            .fold(0.0, f64::max);
         let boxed = Sphere { center, radius };
         if boxed.radius < grown.radius {
             boxed
@@ -81,7 +93,11 @@ impl Sphere {
         }
         let radius = (d + self.radius + b.radius) * 0.5;
         // Move the centre from self.center towards b.center by (radius - self.radius).
-        let t = if d > 0.0 { (radius - self.radius) / d } else { 0.0 };
+        let t = if d > 0.0 {
+            (radius - self.radius) / d
+        } else {
+            0.0
+        };
         let center = std::array::from_fn(|i| self.center[i] + (b.center[i] - self.center[i]) * t);
         Sphere { center, radius }
     }
@@ -106,7 +122,10 @@ impl Sphere {
     /// Inverse of [`Sphere::to_f32`] (without removing the padding: a stored sphere read
     /// back still contains what it contained).
     pub fn from_f32(s: [f32; 4]) -> Sphere {
-        Sphere { center: [s[0] as f64, s[1] as f64, s[2] as f64], radius: s[3] as f64 }
+        Sphere {
+            center: [s[0] as f64, s[1] as f64, s[2] as f64],
+            radius: s[3] as f64,
+        }
     }
 }
 
@@ -149,8 +168,16 @@ mod tests {
     use proptest::prelude::*;
 
     fn ball() -> impl Strategy<Value = Sphere> {
-        (-100.0..100.0f64, -100.0..100.0f64, -100.0..100.0f64, 0.0..50.0f64)
-            .prop_map(|(x, y, z, r)| Sphere { center: [x, y, z], radius: r })
+        (
+            -100.0..100.0f64,
+            -100.0..100.0f64,
+            -100.0..100.0f64,
+            0.0..50.0f64,
+        )
+            .prop_map(|(x, y, z, r)| Sphere {
+                center: [x, y, z],
+                radius: r,
+            })
     }
 
     proptest! {

@@ -5,7 +5,7 @@
 //! back into the diamond's tetrahedra.
 
 use crate::bounds::Sphere;
-use crate::patch::{WorkPatch, WorkVertex, Welder};
+use crate::patch::{Welder, WorkPatch, WorkVertex};
 use rustc_hash::{FxHashMap, FxHashSet};
 
 /// Tuning of the simplifier.
@@ -45,7 +45,11 @@ pub fn merge(children: &[&WorkPatch]) -> Merged {
         indices.extend(c.indices.iter().map(|&i| map[i as usize]));
         child_maps.push(map);
     }
-    Merged { vertices: w.vertices, indices, child_maps }
+    Merged {
+        vertices: w.vertices,
+        indices,
+        child_maps,
+    }
 }
 
 /// Vertices that must not move: every vertex on an edge used by exactly one triangle (or
@@ -53,7 +57,8 @@ pub fn merge(children: &[&WorkPatch]) -> Merged {
 /// attribute seams do not count as borders. Those edges are the diamond's outer border
 /// (shared with patches of other diamonds) and the model's own open boundary.
 pub fn border_locks(vertices: &[WorkVertex], indices: &[u32]) -> Vec<bool> {
-    let mut pos_id: FxHashMap<[u32; 3], u32> = FxHashMap::with_capacity_and_hasher(vertices.len(), Default::default());
+    let mut pos_id: FxHashMap<[u32; 3], u32> =
+        FxHashMap::with_capacity_and_hasher(vertices.len(), Default::default());
     let pid: Vec<u32> = vertices
         .iter()
         .map(|v| {
@@ -61,7 +66,8 @@ pub fn border_locks(vertices: &[WorkVertex], indices: &[u32]) -> Vec<bool> {
             *pos_id.entry(v.q).or_insert(n)
         })
         .collect();
-    let mut edges: FxHashMap<(u32, u32), u32> = FxHashMap::with_capacity_and_hasher(indices.len(), Default::default());
+    let mut edges: FxHashMap<(u32, u32), u32> =
+        FxHashMap::with_capacity_and_hasher(indices.len(), Default::default());
     for t in indices.chunks_exact(3) {
         for k in 0..3 {
             let (a, b) = (pid[t[k] as usize], pid[t[(k + 1) % 3] as usize]);
@@ -80,7 +86,12 @@ pub fn border_locks(vertices: &[WorkVertex], indices: &[u32]) -> Vec<bool> {
 
 /// Simplify the merged mesh towards `target_triangles` with the locks. Returns the new
 /// index list (a subset of the merged vertices) and the error in grid units.
-pub fn simplify(m: &Merged, locks: &[bool], target_triangles: usize, cfg: &SimplifyConfig) -> (Vec<u32>, f32) {
+pub fn simplify(
+    m: &Merged,
+    locks: &[bool],
+    target_triangles: usize,
+    cfg: &SimplifyConfig,
+) -> (Vec<u32>, f32) {
     if m.indices.len() / 3 <= target_triangles || m.vertices.is_empty() {
         return (m.indices.clone(), 0.0);
     }
@@ -143,9 +154,21 @@ pub struct RepairCounts {
 
 /// Twice the area vector of a triangle of grid points, exactly (coordinates < 2^22).
 fn cross_q(a: [u32; 3], b: [u32; 3], c: [u32; 3]) -> [i64; 3] {
-    let u = [b[0] as i64 - a[0] as i64, b[1] as i64 - a[1] as i64, b[2] as i64 - a[2] as i64];
-    let v = [c[0] as i64 - a[0] as i64, c[1] as i64 - a[1] as i64, c[2] as i64 - a[2] as i64];
-    [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]]
+    let u = [
+        b[0] as i64 - a[0] as i64,
+        b[1] as i64 - a[1] as i64,
+        b[2] as i64 - a[2] as i64,
+    ];
+    let v = [
+        c[0] as i64 - a[0] as i64,
+        c[1] as i64 - a[1] as i64,
+        c[2] as i64 - a[2] as i64,
+    ];
+    [
+        u[1] * v[2] - u[2] * v[1],
+        u[2] * v[0] - u[0] * v[2],
+        u[0] * v[1] - u[1] * v[0],
+    ]
 }
 
 /// Repairs defects the simplifier can leave, each of which makes an edge used by four
@@ -175,7 +198,11 @@ pub fn repair(vertices: &[WorkVertex], indices: &mut Vec<u32>) -> RepairCounts {
     }
     let mut drop = vec![false; indices.len() / 3];
     let rotation = |t: usize| {
-        let p = [q(indices[3 * t]), q(indices[3 * t + 1]), q(indices[3 * t + 2])];
+        let p = [
+            q(indices[3 * t]),
+            q(indices[3 * t + 1]),
+            q(indices[3 * t + 2]),
+        ];
         let r = (0..3).min_by_key(|&k| p[k]).unwrap_or(0);
         [p[r], p[(r + 1) % 3], p[(r + 2) % 3]]
     };
@@ -197,18 +224,22 @@ pub fn repair(vertices: &[WorkVertex], indices: &mut Vec<u32>) -> RepairCounts {
         *indices = kept;
     }
     // Ears: directed edge -> triangle.
-    let mut edge: FxHashMap<(u32, u32), usize> = FxHashMap::with_capacity_and_hasher(indices.len(), Default::default());
+    let mut edge: FxHashMap<(u32, u32), usize> =
+        FxHashMap::with_capacity_and_hasher(indices.len(), Default::default());
     for (t, tri) in indices.chunks_exact(3).enumerate() {
         for k in 0..3 {
             edge.insert((tri[k], tri[(k + 1) % 3]), t);
         }
     }
     // Border edges: used once, vertices welded by position.
-    let mut uses: FxHashMap<([u32; 3], [u32; 3]), u32> = FxHashMap::with_capacity_and_hasher(indices.len(), Default::default());
+    let mut uses: FxHashMap<([u32; 3], [u32; 3]), u32> =
+        FxHashMap::with_capacity_and_hasher(indices.len(), Default::default());
     let undirected = |a: [u32; 3], b: [u32; 3]| (a.min(b), a.max(b));
     for tri in indices.chunks_exact(3) {
         for k in 0..3 {
-            *uses.entry(undirected(q(tri[k]), q(tri[(k + 1) % 3]))).or_default() += 1;
+            *uses
+                .entry(undirected(q(tri[k]), q(tri[(k + 1) % 3])))
+                .or_default() += 1;
         }
     }
     let border = |a: u32, b: u32| uses.get(&undirected(q(a), q(b))) == Some(&1);
@@ -219,8 +250,14 @@ pub fn repair(vertices: &[WorkVertex], indices: &mut Vec<u32>) -> RepairCounts {
             on_border.insert(b);
         }
     }
-    let dist2 = |a: [u32; 3], b: [u32; 3]| (0..3).map(|i| (a[i] as i64 - b[i] as i64).pow(2)).sum::<i64>();
-    let dot = |a: [i64; 3], b: [i64; 3]| a[0] as i128 * b[0] as i128 + a[1] as i128 * b[1] as i128 + a[2] as i128 * b[2] as i128;
+    let dist2 = |a: [u32; 3], b: [u32; 3]| {
+        (0..3)
+            .map(|i| (a[i] as i64 - b[i] as i64).pow(2))
+            .sum::<i64>()
+    };
+    let dot = |a: [i64; 3], b: [i64; 3]| {
+        a[0] as i128 * b[0] as i128 + a[1] as i128 * b[1] as i128 + a[2] as i128 * b[2] as i128
+    };
     for t in 0..indices.len() / 3 {
         let tri = [indices[3 * t], indices[3 * t + 1], indices[3 * t + 2]];
         let p = tri.map(q);
@@ -230,15 +267,23 @@ pub fn repair(vertices: &[WorkVertex], indices: &mut Vec<u32>) -> RepairCounts {
         // Rotate to (A, C, B), directed edge B -> A to be flipped: for a zero-area
         // triangle the longest edge, for a border ear the one edge not on the border.
         let r = if cross_q(p[0], p[1], p[2]) == [0; 3] {
-            (0..3).max_by_key(|&k| dist2(p[(k + 2) % 3], p[k])).unwrap_or(0)
+            (0..3)
+                .max_by_key(|&k| dist2(p[(k + 2) % 3], p[k]))
+                .unwrap_or(0)
         } else {
-            match (0..3).find(|&k| !border(tri[(k + 2) % 3], tri[k]) && border(tri[k], tri[(k + 1) % 3]) && border(tri[(k + 1) % 3], tri[(k + 2) % 3])) {
+            match (0..3).find(|&k| {
+                !border(tri[(k + 2) % 3], tri[k])
+                    && border(tri[k], tri[(k + 1) % 3])
+                    && border(tri[(k + 1) % 3], tri[(k + 2) % 3])
+            }) {
                 Some(k) => k,
                 None => continue,
             }
         };
         let (a, c, b) = (tri[r], tri[(r + 1) % 3], tri[(r + 2) % 3]);
-        let Some(&t2) = edge.get(&(a, b)) else { continue };
+        let Some(&t2) = edge.get(&(a, b)) else {
+            continue;
+        };
         let tri2 = [indices[3 * t2], indices[3 * t2 + 1], indices[3 * t2 + 2]];
         let k2 = (0..3).find(|&k| tri2[k] == a).unwrap_or(0);
         if tri2[(k2 + 1) % 3] != b {
@@ -251,8 +296,18 @@ pub fn repair(vertices: &[WorkVertex], indices: &mut Vec<u32>) -> RepairCounts {
         // faces against the surface normal at C), i.e. when it is the wrong one of a pair.
         let n_ear = cross_q(q(a), q(c), q(b));
         let nc = vertices[c as usize].normal;
-        let folded = n_ear.iter().zip(nc).map(|(&x, y)| x as f64 * y as f64).sum::<f64>() < 0.0;
-        if d == c || n2 == [0; 3] || (on_border.contains(&q(d)) && !folded) || edge.contains_key(&(c, d)) || edge.contains_key(&(d, c)) {
+        let folded = n_ear
+            .iter()
+            .zip(nc)
+            .map(|(&x, y)| x as f64 * y as f64)
+            .sum::<f64>()
+            < 0.0;
+        if d == c
+            || n2 == [0; 3]
+            || (on_border.contains(&q(d)) && !folded)
+            || edge.contains_key(&(c, d))
+            || edge.contains_key(&(d, c))
+        {
             continue;
         }
         if dot(cross_q(q(a), q(c), q(d)), n2) <= 0 || dot(cross_q(q(c), q(b), q(d)), n2) <= 0 {
@@ -263,7 +318,14 @@ pub fn repair(vertices: &[WorkVertex], indices: &mut Vec<u32>) -> RepairCounts {
         }
         indices[3 * t..3 * t + 3].copy_from_slice(&[a, c, d]);
         indices[3 * t2..3 * t2 + 3].copy_from_slice(&[c, b, d]);
-        for (x, y, tt) in [(a, c, t), (c, d, t), (d, a, t), (c, b, t2), (b, d, t2), (d, c, t2)] {
+        for (x, y, tt) in [
+            (a, c, t),
+            (c, d, t),
+            (d, a, t),
+            (c, b, t2),
+            (b, d, t2),
+            (d, c, t2),
+        ] {
             edge.insert((x, y), tt);
         }
         counts.flipped += 1;
@@ -348,7 +410,12 @@ pub fn morph_destinations(m: &Merged, simplified: &[u32]) -> Vec<u32> {
 
 /// Split simplified triangles among the diamond's tetrahedra: `owner(centroid)` says
 /// which (index into the diamond's list). Each part gets compact vertices.
-pub fn split(m: &Merged, simplified: &[u32], parts: usize, mut owner: impl FnMut([[u32; 3]; 3]) -> usize) -> Vec<WorkPatch> {
+pub fn split(
+    m: &Merged,
+    simplified: &[u32],
+    parts: usize,
+    mut owner: impl FnMut([[u32; 3]; 3]) -> usize,
+) -> Vec<WorkPatch> {
     let mut remaps: Vec<FxHashMap<u32, u32>> = vec![FxHashMap::default(); parts];
     let mut out: Vec<WorkPatch> = vec![WorkPatch::default(); parts];
     for t in simplified.chunks_exact(3) {
@@ -370,7 +437,12 @@ pub fn split(m: &Merged, simplified: &[u32], parts: usize, mut owner: impl FnMut
 /// Saturated sphere of a diamond: contains the tight spheres of its new patches and the
 /// saturated spheres of all its children.
 pub fn saturated_sphere(tight: &[Sphere], children: &[Sphere]) -> Sphere {
-    let all: Vec<Sphere> = tight.iter().chain(children).copied().filter(|s| s.radius > 0.0 || s.center != [0.0; 3]).collect();
+    let all: Vec<Sphere> = tight
+        .iter()
+        .chain(children)
+        .copied()
+        .filter(|s| s.radius > 0.0 || s.center != [0.0; 3])
+        .collect();
     Sphere::of_balls(&all)
 }
 
@@ -383,14 +455,19 @@ mod tests {
         let mut p = WorkPatch::default();
         for j in 0..=n {
             for i in 0..=n {
-                p.vertices.push(WorkVertex { q: [x0 + i * 10, j * 10, 0], normal: [0.0, 0.0, 1.0], ..Default::default() });
+                p.vertices.push(WorkVertex {
+                    q: [x0 + i * 10, j * 10, 0],
+                    normal: [0.0, 0.0, 1.0],
+                    ..Default::default()
+                });
             }
         }
         let w = n + 1;
         for j in 0..n {
             for i in 0..n {
                 let a = j * w + i;
-                p.indices.extend_from_slice(&[a, a + 1, a + w, a + 1, a + w + 1, a + w]);
+                p.indices
+                    .extend_from_slice(&[a, a + 1, a + w, a + 1, a + w + 1, a + w]);
             }
         }
         p
@@ -414,10 +491,19 @@ mod tests {
         let a = grid_patch(20, 0);
         let m = merge(&[&a]);
         let locks = border_locks(&m.vertices, &m.indices);
-        let cfg = SimplifyConfig { node_triangles: 100, normal_weight: 0.5, color_weight: 0.5, has_colors: false, use_normals: true };
+        let cfg = SimplifyConfig {
+            node_triangles: 100,
+            normal_weight: 0.5,
+            color_weight: 0.5,
+            has_colors: false,
+            use_normals: true,
+        };
         let (out, err) = simplify(&m, &locks, 100, &cfg);
         assert!(out.len() / 3 < 800);
-        assert!(err >= 0.0 && err < 1.0, "flat grid simplifies with ~zero error, got {err}");
+        assert!(
+            err >= 0.0 && err < 1.0,
+            "flat grid simplifies with ~zero error, got {err}"
+        );
         let used: std::collections::HashSet<u32> = out.iter().copied().collect();
         for (i, &l) in locks.iter().enumerate() {
             if l {
@@ -438,7 +524,10 @@ mod tests {
         // Why: issue 2's crack tests found cuts where an edge was used by four triangles:
         // two neighbouring diamonds each kept a zero-area ear (A, C, B) on their shared,
         // locked border, each next to a triangle across AB.
-        let v = |x: u32, y: u32| WorkVertex { q: [x, y, 0], ..Default::default() };
+        let v = |x: u32, y: u32| WorkVertex {
+            q: [x, y, 0],
+            ..Default::default()
+        };
         // A C B on a line (the locked border), D an interior vertex fanned by E, F.
         let verts = vec![v(0, 0), v(2, 0), v(4, 0), v(2, 3), v(0, 6), v(4, 6)];
         let (a, c, b, d, e, f) = (0u32, 1, 2, 3, 4, 5);
@@ -447,7 +536,10 @@ mod tests {
         assert_eq!(r.flipped, 1);
         assert_eq!(&idx[..6], &[a, c, d, c, b, d]);
         // Border edges A->C and C->B survive; AB is gone.
-        let edges: Vec<(u32, u32)> = idx.chunks(3).flat_map(|t| (0..3).map(move |k| (t[k], t[(k + 1) % 3]))).collect();
+        let edges: Vec<(u32, u32)> = idx
+            .chunks(3)
+            .flat_map(|t| (0..3).map(move |k| (t[k], t[(k + 1) % 3])))
+            .collect();
         assert!(edges.contains(&(a, c)) && edges.contains(&(c, b)) && !edges.contains(&(a, b)));
         // The same ear next to a border vertex D is left alone: flipping would make a
         // triangle with three border corners.
@@ -463,7 +555,13 @@ mod tests {
     fn split_assigns_every_triangle_once() {
         let a = grid_patch(4, 0);
         let m = merge(&[&a]);
-        let parts = split(&m, &m.indices, 2, |q| if q[0][0] + q[1][0] + q[2][0] < 60 { 0 } else { 1 });
+        let parts = split(&m, &m.indices, 2, |q| {
+            if q[0][0] + q[1][0] + q[2][0] < 60 {
+                0
+            } else {
+                1
+            }
+        });
         assert_eq!(parts.iter().map(|p| p.triangle_count()).sum::<usize>(), 32);
         assert!(parts.iter().all(|p| p.triangle_count() > 0));
     }

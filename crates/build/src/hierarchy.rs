@@ -10,7 +10,7 @@ use crate::bounds::Sphere;
 use crate::diamond::{self, SimplifyConfig};
 use crate::import::Imported;
 use crate::partition::{parent_id, read_leaf_faces, tet_id, Leaf, Partition, TetId};
-use crate::patch::{remove_bad_triangles, WorkPatch, WorkVertex, Welder};
+use crate::patch::{remove_bad_triangles, Welder, WorkPatch, WorkVertex};
 use crate::{BuildError, BuildOptions, BuildReport, Progress};
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
@@ -20,8 +20,8 @@ use std::path::Path;
 use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 use std::sync::Mutex;
 use tessera_format::{
-    encode_patch, write_model, Header, NodeRecord, PatchData, PatchSpool, SpooledPatch, ATTR_COLORS, ATTR_NORMALS,
-    ATTR_UVS, NODE_FLAG_LEAF, NO_NODE,
+    encode_patch, write_model, Header, NodeRecord, PatchData, PatchSpool, SpooledPatch,
+    ATTR_COLORS, ATTR_NORMALS, ATTR_UVS, NODE_FLAG_LEAF, NO_NODE,
 };
 use tessera_tetra::{DiamondKey, Locator, Tet};
 
@@ -86,7 +86,9 @@ const LEVEL_REDUCTION: usize = 3;
 
 /// Triangles a parent tetrahedron keeps when its children hold `children`.
 fn parent_target(children: usize, node_triangles: usize) -> usize {
-    (children / LEVEL_REDUCTION).max(children.min(MIN_PATCH_TRIANGLES)).min(node_triangles)
+    (children / LEVEL_REDUCTION)
+        .max(children.min(MIN_PATCH_TRIANGLES))
+        .min(node_triangles)
 }
 
 fn stored(s: &Sphere, scale: f64) -> Sphere {
@@ -100,13 +102,19 @@ impl Ctx<'_> {
 
     fn quantized(&self, v: u32) -> WorkVertex {
         let s = self.imp.vertices.get(v);
-        WorkVertex { q: self.part.grid.quantize(s.position), normal: s.normal, color: s.color, uv: s.uv }
+        WorkVertex {
+            q: self.part.grid.quantize(s.position),
+            normal: s.normal,
+            color: s.color,
+            uv: s.uv,
+        }
     }
 
     /// A leaf's patch from its bucket: weld, clean, optimise.
     fn load_leaf(&self, leaf: &Leaf) -> Result<WorkPatch, BuildError> {
         let faces = read_leaf_faces(&self.buckets, &self.part.buckets, leaf)?;
-        let mut local: FxHashMap<u32, u32> = FxHashMap::with_capacity_and_hasher(faces.len(), Default::default());
+        let mut local: FxHashMap<u32, u32> =
+            FxHashMap::with_capacity_and_hasher(faces.len(), Default::default());
         let mut w = Welder::with_capacity(faces.len());
         let mut indices = Vec::with_capacity(faces.len() * 3);
         for f in &faces {
@@ -124,14 +132,21 @@ impl Ctx<'_> {
         }
         // The vertex store is memory-mapped: release its resident pages every few
         // megabytes of leaves, or RSS would grow towards the size of the whole store.
-        let loaded = self.leaf_vertices_loaded.fetch_add(local.len() as u64, Ordering::Relaxed) + local.len() as u64;
-        if loaded / RELEASE_EVERY_VERTICES != (loaded - local.len() as u64) / RELEASE_EVERY_VERTICES {
+        let loaded = self
+            .leaf_vertices_loaded
+            .fetch_add(local.len() as u64, Ordering::Relaxed)
+            + local.len() as u64;
+        if loaded / RELEASE_EVERY_VERTICES != (loaded - local.len() as u64) / RELEASE_EVERY_VERTICES
+        {
             self.imp.vertices.release();
         }
         let c = remove_bad_triangles(&mut indices, &w.vertices);
         self.degenerate.fetch_add(c.degenerate, Ordering::Relaxed);
         self.duplicate.fetch_add(c.duplicate, Ordering::Relaxed);
-        let mut p = WorkPatch { vertices: w.vertices, indices };
+        let mut p = WorkPatch {
+            vertices: w.vertices,
+            indices,
+        };
         p.optimize();
         Ok(p)
     }
@@ -159,15 +174,30 @@ impl Ctx<'_> {
         let data = PatchData {
             positions: p.vertices.iter().map(|v| v.q).collect(),
             normals: p.vertices.iter().map(|v| v.normal).collect(),
-            colors: if self.attributes & ATTR_COLORS != 0 { p.vertices.iter().map(|v| v.color).collect() } else { vec![] },
-            uvs: if self.attributes & ATTR_UVS != 0 { p.vertices.iter().map(|v| v.uv).collect() } else { vec![] },
+            colors: if self.attributes & ATTR_COLORS != 0 {
+                p.vertices.iter().map(|v| v.color).collect()
+            } else {
+                vec![]
+            },
+            uvs: if self.attributes & ATTR_UVS != 0 {
+                p.vertices.iter().map(|v| v.uv).collect()
+            } else {
+                vec![]
+            },
             morph_targets: morph,
             indices: p.indices.clone(),
         };
         let qmin = quant_min(&p.vertices);
-        let sp = self.out.append(&encode_patch(&data, self.attributes, qmin))?;
-        let mut nodes = self.nodes.lock().map_err(|_| self.internal_err("poisoned node map"))?;
-        let n = nodes.get_mut(&id).ok_or_else(|| self.internal_err("emit of unknown node"))?;
+        let sp = self
+            .out
+            .append(&encode_patch(&data, self.attributes, qmin))?;
+        let mut nodes = self
+            .nodes
+            .lock()
+            .map_err(|_| self.internal_err("poisoned node map"))?;
+        let n = nodes
+            .get_mut(&id)
+            .ok_or_else(|| self.internal_err("emit of unknown node"))?;
         n.out = Some(sp);
         n.quant_min = qmin;
         n.work = None;
@@ -180,18 +210,29 @@ impl Ctx<'_> {
         if let Some(leaf) = self.leaf_of.get(&id) {
             let p = self.load_leaf(leaf)?;
             let info = self.leaf_info(id, &p);
-            self.nodes.lock().map_err(|_| self.internal_err("poisoned node map"))?.insert(id, info);
+            self.nodes
+                .lock()
+                .map_err(|_| self.internal_err("poisoned node map"))?
+                .insert(id, info);
             return Ok(Some(p));
         }
         if !self.internal.contains(&id) {
             return Ok(None);
         }
         let sp = {
-            let nodes = self.nodes.lock().map_err(|_| self.internal_err("poisoned node map"))?;
-            nodes.get(&id).and_then(|n| n.work).ok_or_else(|| self.internal_err("child patch missing"))?
+            let nodes = self
+                .nodes
+                .lock()
+                .map_err(|_| self.internal_err("poisoned node map"))?;
+            nodes
+                .get(&id)
+                .and_then(|n| n.work)
+                .ok_or_else(|| self.internal_err("child patch missing"))?
         };
         let bytes = self.work.read(&sp)?;
-        WorkPatch::from_bytes(&bytes).map(Some).ok_or_else(|| self.internal_err("corrupt temporary patch"))
+        WorkPatch::from_bytes(&bytes)
+            .map(Some)
+            .ok_or_else(|| self.internal_err("corrupt temporary patch"))
     }
 
     /// One diamond (ATP 5.2).
@@ -211,19 +252,33 @@ impl Ctx<'_> {
         let refs: Vec<&WorkPatch> = kids.iter().map(|k| &k.1).collect();
         let merged = diamond::merge(&refs);
         let locks = diamond::border_locks(&merged.vertices, &merged.indices);
-        let target: usize = per_tet_tris.iter().map(|&n| parent_target(n, self.cfg.node_triangles)).sum();
+        let target: usize = per_tet_tris
+            .iter()
+            .map(|&n| parent_target(n, self.cfg.node_triangles))
+            .sum();
         let (mut simplified, err_grid) = diamond::simplify(&merged, &locks, target, &self.cfg);
         let fixed = diamond::repair(&merged.vertices, &mut simplified);
-        self.repaired.fetch_add(fixed.flipped + fixed.folded_pairs_removed, Ordering::Relaxed);
+        self.repaired.fetch_add(
+            fixed.flipped + fixed.folded_pairs_removed,
+            Ordering::Relaxed,
+        );
         // 3. Morph destinations; the children are now complete and can be written.
         let dest = diamond::morph_destinations(&merged, &simplified);
         let mut child_err = 0.0f64;
         let mut balls = Vec::new();
         for (k, (id, p)) in kids.iter().enumerate() {
-            let morph = merged.child_maps[k].iter().map(|&mi| merged.vertices[dest[mi as usize] as usize].q).collect();
+            let morph = merged.child_maps[k]
+                .iter()
+                .map(|&mi| merged.vertices[dest[mi as usize] as usize].q)
+                .collect();
             self.emit(*id, p, morph)?;
-            let nodes = self.nodes.lock().map_err(|_| self.internal_err("poisoned node map"))?;
-            let n = nodes.get(id).ok_or_else(|| self.internal_err("child info missing"))?;
+            let nodes = self
+                .nodes
+                .lock()
+                .map_err(|_| self.internal_err("poisoned node map"))?;
+            let n = nodes
+                .get(id)
+                .ok_or_else(|| self.internal_err("child info missing"))?;
             child_err = child_err.max(n.error);
             balls.push(n.sat);
         }
@@ -243,8 +298,14 @@ impl Ctx<'_> {
             // Outside the diamond (the simplified surface moved a little): nearest
             // tetrahedron centre. Any choice is crack-free, since the tetrahedra of a
             // diamond are always drawn together.
-            let d = |i: usize| (0..3).map(|a| ((c[a] * 4 - centroids[i][a] * 3) as f64).powi(2)).sum::<f64>();
-            (0..tets.len()).min_by(|&a, &b| d(a).total_cmp(&d(b))).unwrap_or(0)
+            let d = |i: usize| {
+                (0..3)
+                    .map(|a| ((c[a] * 4 - centroids[i][a] * 3) as f64).powi(2))
+                    .sum::<f64>()
+            };
+            (0..tets.len())
+                .min_by(|&a, &b| d(a).total_cmp(&d(b)))
+                .unwrap_or(0)
         };
         let mut parts = diamond::split(&merged, &simplified, tets.len(), owner);
         // 5. Bounds and saturation.
@@ -265,7 +326,10 @@ impl Ctx<'_> {
             let info = NodeInfo {
                 id: tet_id(t),
                 leaf: false,
-                tight: tight.unwrap_or(Sphere { center: sat.center, radius: 0.0 }),
+                tight: tight.unwrap_or(Sphere {
+                    center: sat.center,
+                    radius: 0.0,
+                }),
                 sat,
                 error: (error as f32) as f64,
                 cone: p.normal_cone(),
@@ -276,7 +340,10 @@ impl Ctx<'_> {
                 work: Some(work),
                 out: None,
             };
-            self.nodes.lock().map_err(|_| self.internal_err("poisoned node map"))?.insert(tet_id(t), info);
+            self.nodes
+                .lock()
+                .map_err(|_| self.internal_err("poisoned node map"))?
+                .insert(tet_id(t), info);
         }
         Ok(())
     }
@@ -311,14 +378,19 @@ pub(crate) fn build_hierarchy(
     }
     let mut by_level: Vec<FxHashMap<DiamondKey, Vec<Tet>>> = Vec::new();
     for &(r, l, p) in &internal {
-        let t = Tet::from_path(r, l, p).ok_or_else(|| BuildError::Internal("bad tetrahedron".into()))?;
+        let t = Tet::from_path(r, l, p)
+            .ok_or_else(|| BuildError::Internal("bad tetrahedron".into()))?;
         if by_level.len() <= l as usize {
             by_level.resize_with(l as usize + 1, FxHashMap::default);
         }
         by_level[l as usize].entry(t.diamond()).or_default().push(t);
     }
     let attributes = ATTR_NORMALS
-        | if imp.attributes.colors { ATTR_COLORS } else { 0 }
+        | if imp.attributes.colors {
+            ATTR_COLORS
+        } else {
+            0
+        }
         | if imp.attributes.uvs { ATTR_UVS } else { 0 };
     let ctx = Ctx {
         imp,
@@ -347,7 +419,8 @@ pub(crate) fn build_hierarchy(
     let total_diamonds: usize = by_level.iter().map(|m| m.len()).sum();
     progress.stage("simplify diamonds", total_diamonds as u64);
     for level in (0..by_level.len()).rev() {
-        let mut diamonds: Vec<Vec<Tet>> = std::mem::take(&mut by_level[level]).into_values().collect();
+        let mut diamonds: Vec<Vec<Tet>> =
+            std::mem::take(&mut by_level[level]).into_values().collect();
         for d in diamonds.iter_mut() {
             d.sort_by_key(|t| (t.root, t.path));
         }
@@ -363,7 +436,12 @@ pub(crate) fn build_hierarchy(
             r
         })?;
         imp.vertices.release();
-        tracing::info!(level, diamonds = diamonds.len(), seconds = t.elapsed().as_secs_f64(), "diamond level done");
+        tracing::info!(
+            level,
+            diamonds = diamonds.len(),
+            seconds = t.elapsed().as_secs_f64(),
+            "diamond level done"
+        );
     }
     progress.finish_stage();
     // Roots: encode (no morph targets); unsplit roots are leaves, loaded here.
@@ -379,18 +457,30 @@ pub(crate) fn build_hierarchy(
     finalize(&ctx, output, opts, progress, report)
 }
 
-fn finalize(ctx: &Ctx, output: &Path, opts: &BuildOptions, progress: &dyn Progress, report: &mut BuildReport) -> Result<(), BuildError> {
+fn finalize(
+    ctx: &Ctx,
+    output: &Path,
+    opts: &BuildOptions,
+    progress: &dyn Progress,
+    report: &mut BuildReport,
+) -> Result<(), BuildError> {
     progress.stage("write", 0);
     let nodes = std::mem::take(&mut *ctx.nodes.lock().map_err(|_| ctx.internal_err("poisoned"))?);
     let mut infos: Vec<(u64, NodeInfo)> = nodes
         .into_values()
         .map(|n| {
-            let m = Tet::from_path(n.id.0, n.id.1, n.id.2).map(|t| t.morton()).unwrap_or(0);
+            let m = Tet::from_path(n.id.0, n.id.1, n.id.2)
+                .map(|t| t.morton())
+                .unwrap_or(0);
             (m, n)
         })
         .collect();
     infos.sort_by_key(|(m, n)| (n.id.1, *m, n.id.0, n.id.2));
-    let index: FxHashMap<TetId, u32> = infos.iter().enumerate().map(|(i, (_, n))| (n.id, i as u32)).collect();
+    let index: FxHashMap<TetId, u32> = infos
+        .iter()
+        .enumerate()
+        .map(|(i, (_, n))| (n.id, i as u32))
+        .collect();
     let grid = ctx.part.grid;
     let mut records = Vec::with_capacity(infos.len());
     let mut patches = Vec::with_capacity(infos.len());
@@ -399,13 +489,20 @@ fn finalize(ctx: &Ctx, output: &Path, opts: &BuildOptions, progress: &dyn Progre
     let mut root_balls = Vec::new();
     for (_, n) in &infos {
         let (r, l, p) = n.id;
-        let child = |c: u64| index.get(&(r, l + 1, p | (c << l))).copied().unwrap_or(NO_NODE);
+        let child = |c: u64| {
+            index
+                .get(&(r, l + 1, p | (c << l)))
+                .copied()
+                .unwrap_or(NO_NODE)
+        };
         let rec = NodeRecord {
             tet_path: p,
             vertex_count: n.vertex_count,
             triangle_count: n.triangle_count,
             children: [child(0), child(1)],
-            parent: parent_id(n.id).and_then(|pid| index.get(&pid).copied()).unwrap_or(NO_NODE),
+            parent: parent_id(n.id)
+                .and_then(|pid| index.get(&pid).copied())
+                .unwrap_or(NO_NODE),
             diamond: n.diamond,
             level: l,
             root: r,
@@ -425,7 +522,10 @@ fn finalize(ctx: &Ctx, output: &Path, opts: &BuildOptions, progress: &dyn Progre
         report.stored_triangles += n.triangle_count as u64;
         report.leaves += n.leaf as u64;
         records.push(rec);
-        patches.push(n.out.ok_or_else(|| ctx.internal_err("node without an encoded patch"))?);
+        patches.push(
+            n.out
+                .ok_or_else(|| ctx.internal_err("node without an encoded patch"))?,
+        );
     }
     let bs = Sphere::of_balls(&root_balls);
     let header = Header {
@@ -435,7 +535,12 @@ fn finalize(ctx: &Ctx, output: &Path, opts: &BuildOptions, progress: &dyn Progre
         input_triangles: ctx.imp.face_count,
         cube_origin: grid.origin,
         cube_size: grid.size,
-        bounding_sphere: [bs.center[0] + grid.origin[0], bs.center[1] + grid.origin[1], bs.center[2] + grid.origin[2], bs.radius],
+        bounding_sphere: [
+            bs.center[0] + grid.origin[0],
+            bs.center[1] + grid.origin[1],
+            bs.center[2] + grid.origin[2],
+            bs.radius,
+        ],
         root_count: root_balls.len() as u32,
         level_count: levels,
         max_error,
@@ -452,6 +557,8 @@ fn finalize(ctx: &Ctx, output: &Path, opts: &BuildOptions, progress: &dyn Progre
     report.mean_edge = ctx.part.mean_edge;
     report.quant_step = grid.step();
     report.quant_error_max = grid.step() * 3f64.sqrt() / 2.0;
-    report.output_bytes = std::fs::metadata(output).map_err(|e| BuildError::io(output, e))?.len();
+    report.output_bytes = std::fs::metadata(output)
+        .map_err(|e| BuildError::io(output, e))?
+        .len();
     Ok(())
 }

@@ -116,7 +116,12 @@ impl MeshVisitor for Sink<'_> {
             self.bounds.min[i] = self.bounds.min[i].min(c);
             self.bounds.max[i] = self.bounds.max[i].max(c);
         }
-        let s = StoredVertex { position: v.position, normal: v.normal, color: v.color, uv: v.uv };
+        let s = StoredVertex {
+            position: v.position,
+            normal: v.normal,
+            color: v.color,
+            uv: v.uv,
+        };
         self.vertices
             .write_all(bytemuck::bytes_of(&s))
             .map_err(|e| MeshError::Visitor(format!("{}: {e}", self.paths.0.display())))?;
@@ -150,16 +155,28 @@ pub fn import(input: &Path, tmp: &Path, progress: &dyn Progress) -> Result<Impor
         attributes: Attributes::default(),
         vertex_count: 0,
         face_count: 0,
-        bounds: Aabb { min: [f64::INFINITY; 3], max: [f64::NEG_INFINITY; 3] },
+        bounds: Aabb {
+            min: [f64::INFINITY; 3],
+            max: [f64::NEG_INFINITY; 3],
+        },
         progress,
         paths: (&vpath, &fpath),
     };
     progress.stage("import", 0);
     let report = tessera_mesh::read_mesh(input, &mut sink).map_err(BuildError::Input)?;
     progress.finish_stage();
-    let Sink { vertices, faces, attributes, vertex_count, face_count, bounds, .. } = sink;
+    let Sink {
+        vertices,
+        faces,
+        attributes,
+        vertex_count,
+        face_count,
+        bounds,
+        ..
+    } = sink;
     for (w, p) in [(vertices, &vpath), (faces, &fpath)] {
-        w.into_inner().map_err(|e| BuildError::io(p, e.into_error()))?;
+        w.into_inner()
+            .map_err(|e| BuildError::io(p, e.into_error()))?;
     }
     if face_count == 0 {
         return Err(BuildError::EmptyInput(input.to_path_buf()));
@@ -170,7 +187,10 @@ pub fn import(input: &Path, tmp: &Path, progress: &dyn Progress) -> Result<Impor
     } else {
         normalise_given_normals(&vpath)?;
     }
-    let attributes = Attributes { normals: true, ..attributes };
+    let attributes = Attributes {
+        normals: true,
+        ..attributes
+    };
     Ok(Imported {
         vertices: VertexStore::open(&vpath)?,
         faces_path: fpath,
@@ -207,16 +227,28 @@ fn release_mut(map: &MmapMut) {
 
 /// Area-weighted vertex normals, accumulated over the face list in one sequential pass
 /// (sequential so the sums, and so the output, are deterministic).
-fn compute_normals(vpath: &Path, fpath: &Path, faces: u64, progress: &dyn Progress) -> Result<(), BuildError> {
-    let Some(mut map) = map_mut(vpath)? else { return Ok(()) };
+fn compute_normals(
+    vpath: &Path,
+    fpath: &Path,
+    faces: u64,
+    progress: &dyn Progress,
+) -> Result<(), BuildError> {
+    let Some(mut map) = map_mut(vpath)? else {
+        return Ok(());
+    };
     progress.stage("normals", faces);
     // The store's normals are zero already: the importer writes zero for absent normals.
-    let mut reader = BufReader::with_capacity(1 << 20, File::open(fpath).map_err(|e| BuildError::io(fpath, e))?);
+    let mut reader = BufReader::with_capacity(
+        1 << 20,
+        File::open(fpath).map_err(|e| BuildError::io(fpath, e))?,
+    );
     let mut buf = vec![0u8; 12 << 16];
     let mut done = 0u64;
     while done < faces {
         let n = ((faces - done) as usize).min(1 << 16);
-        reader.read_exact(&mut buf[..n * 12]).map_err(|e| BuildError::io(fpath, e))?;
+        reader
+            .read_exact(&mut buf[..n * 12])
+            .map_err(|e| BuildError::io(fpath, e))?;
         let verts: &mut [StoredVertex] = bytemuck::cast_slice_mut(&mut map[..]);
         for f in buf[..n * 12].chunks_exact(12) {
             let t: [u32; 3] = bytemuck::pod_read_unaligned(f);
@@ -259,7 +291,9 @@ fn normalise_released(map: &mut MmapMut) {
 }
 
 fn normalise_given_normals(vpath: &Path) -> Result<(), BuildError> {
-    let Some(mut map) = map_mut(vpath)? else { return Ok(()) };
+    let Some(mut map) = map_mut(vpath)? else {
+        return Ok(());
+    };
     normalise_released(&mut map);
     map.flush().map_err(|e| BuildError::io(vpath, e))?;
     release_mut(&map);
@@ -271,7 +305,11 @@ fn normalise(verts: &mut [StoredVertex]) {
     for v in verts {
         let n = v.normal;
         let l = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
-        v.normal = if l > 0.0 && l.is_finite() { [n[0] / l, n[1] / l, n[2] / l] } else { [0.0, 0.0, 1.0] };
+        v.normal = if l > 0.0 && l.is_finite() {
+            [n[0] / l, n[1] / l, n[2] / l]
+        } else {
+            [0.0, 0.0, 1.0]
+        };
     }
 }
 
@@ -281,7 +319,12 @@ mod tests {
 
     fn rss_file_kib() -> Option<u64> {
         let s = std::fs::read_to_string("/proc/self/status").ok()?;
-        s.lines().find(|l| l.starts_with("RssFile:"))?.split_whitespace().nth(1)?.parse().ok()
+        s.lines()
+            .find(|l| l.starts_with("RssFile:"))?
+            .split_whitespace()
+            .nth(1)?
+            .parse()
+            .ok()
     }
 
     #[test]
@@ -302,8 +345,14 @@ mod tests {
         let touched = rss_file_kib().unwrap();
         store.release();
         let after = rss_file_kib().unwrap();
-        assert!(touched > before + 50_000, "reading 64 MiB should make it resident: {before} -> {touched} KiB");
-        assert!(after + 50_000 < touched, "release did not drop the pages: {touched} -> {after} KiB");
+        assert!(
+            touched > before + 50_000,
+            "reading 64 MiB should make it resident: {before} -> {touched} KiB"
+        );
+        assert!(
+            after + 50_000 < touched,
+            "release did not drop the pages: {touched} -> {after} KiB"
+        );
         drop(store);
         // The same for the writable map of the normals pass (dirty shared pages).
         let mut map = map_mut(&path).unwrap().unwrap();
@@ -315,8 +364,15 @@ mod tests {
         release_mut(&map);
         let after = rss_file_kib().unwrap();
         eprintln!("mut: {before} -> {touched} -> {after} KiB");
-        assert!(after + 50_000 < touched, "release_mut did not drop the pages: {touched} -> {after} KiB");
+        assert!(
+            after + 50_000 < touched,
+            "release_mut did not drop the pages: {touched} -> {after} KiB"
+        );
         map.flush().unwrap();
-        assert_eq!(std::fs::read(&path).unwrap()[4096], 2, "released dirty pages keep their data");
+        assert_eq!(
+            std::fs::read(&path).unwrap()[4096],
+            2,
+            "released dirty pages keep their data"
+        );
     }
 }

@@ -91,7 +91,10 @@ pub enum BuildError {
     #[error("{0}")]
     Input(MeshError),
     #[error("{}: {source}", path.display())]
-    Io { path: PathBuf, source: std::io::Error },
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
     #[error("{}: the mesh has no triangles", .0.display())]
     EmptyInput(PathBuf),
     #[error(transparent)]
@@ -106,7 +109,10 @@ pub enum BuildError {
 
 impl BuildError {
     pub(crate) fn io(path: &Path, source: std::io::Error) -> BuildError {
-        BuildError::Io { path: path.to_path_buf(), source }
+        BuildError::Io {
+            path: path.to_path_buf(),
+            source,
+        }
     }
 }
 
@@ -165,14 +171,26 @@ pub(crate) fn peak_rss_mib() -> u64 {
 
 /// Build `output` from the mesh at `input`. Writes atomically: on any error nothing is
 /// left at `output` (a file already there stays as it was).
-pub fn build(input: &Path, output: &Path, opts: &BuildOptions, progress: &dyn Progress) -> Result<BuildReport, BuildError> {
+pub fn build(
+    input: &Path,
+    output: &Path,
+    opts: &BuildOptions,
+    progress: &dyn Progress,
+) -> Result<BuildReport, BuildError> {
     if let Some(bits) = opts.quant_bits {
         if !(1..=21).contains(&bits) {
-            return Err(BuildError::Options(format!("quantization bits must be 1..=21, got {bits}")));
+            return Err(BuildError::Options(format!(
+                "quantization bits must be 1..=21, got {bits}"
+            )));
         }
     }
-    if opts.leaf_triangles < 16 || opts.node_triangles < 8 || opts.node_triangles > opts.leaf_triangles {
-        return Err(BuildError::Options("need leaf_triangles >= 16 and 8 <= node_triangles <= leaf_triangles".into()));
+    if opts.leaf_triangles < 16
+        || opts.node_triangles < 8
+        || opts.node_triangles > opts.leaf_triangles
+    {
+        return Err(BuildError::Options(
+            "need leaf_triangles >= 16 and 8 <= node_triangles <= leaf_triangles".into(),
+        ));
     }
     let pool = {
         let mut b = rayon::ThreadPoolBuilder::new();
@@ -184,11 +202,20 @@ pub fn build(input: &Path, output: &Path, opts: &BuildOptions, progress: &dyn Pr
     pool.install(|| build_in_pool(input, output, opts, progress))
 }
 
-fn build_in_pool(input: &Path, output: &Path, opts: &BuildOptions, progress: &dyn Progress) -> Result<BuildReport, BuildError> {
+fn build_in_pool(
+    input: &Path,
+    output: &Path,
+    opts: &BuildOptions,
+    progress: &dyn Progress,
+) -> Result<BuildReport, BuildError> {
     let started = Instant::now();
     let tmp_parent = match &opts.tmp_dir {
         Some(d) => d.clone(),
-        None => output.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new(".")).to_path_buf(),
+        None => output
+            .parent()
+            .filter(|p| !p.as_os_str().is_empty())
+            .unwrap_or(Path::new("."))
+            .to_path_buf(),
     };
     let tmp = tempfile::Builder::new()
         .prefix(".tessera-build-")
@@ -197,11 +224,24 @@ fn build_in_pool(input: &Path, output: &Path, opts: &BuildOptions, progress: &dy
     let mut report = BuildReport::default();
     let mut t = Instant::now();
     let mut lap = |name: &str, report: &mut BuildReport| {
-        report.stage_seconds.push((name.to_string(), t.elapsed().as_secs_f64()));
-        tracing::info!(stage = name, seconds = t.elapsed().as_secs_f64(), peak_rss_mib = peak_rss_mib(), "stage done");
+        report
+            .stage_seconds
+            .push((name.to_string(), t.elapsed().as_secs_f64()));
+        tracing::info!(
+            stage = name,
+            seconds = t.elapsed().as_secs_f64(),
+            peak_rss_mib = peak_rss_mib(),
+            "stage done"
+        );
         t = Instant::now();
     };
-    let check = || if progress.cancelled() { Err(BuildError::Interrupted) } else { Ok(()) };
+    let check = || {
+        if progress.cancelled() {
+            Err(BuildError::Interrupted)
+        } else {
+            Ok(())
+        }
+    };
     let imported = import::import(input, tmp.path(), progress)?;
     check()?;
     report.input_vertices = imported.vertex_count;
@@ -213,7 +253,15 @@ fn build_in_pool(input: &Path, output: &Path, opts: &BuildOptions, progress: &dy
     check()?;
     report.oversized_leaves = part.oversized_leaves;
     lap("partition", &mut report);
-    hierarchy::build_hierarchy(&imported, &part, tmp.path(), output, opts, progress, &mut report)?;
+    hierarchy::build_hierarchy(
+        &imported,
+        &part,
+        tmp.path(),
+        output,
+        opts,
+        progress,
+        &mut report,
+    )?;
     lap("hierarchy+write", &mut report);
     report.seconds = started.elapsed().as_secs_f64();
     Ok(report)

@@ -32,8 +32,16 @@ impl Grid {
     /// The cube around a bounding box: min corner at the box's min, edge = longest side.
     pub fn new(min: [f64; 3], max: [f64; 3], bits: u32) -> Grid {
         let ext = (0..3).map(|i| max[i] - min[i]).fold(0.0, f64::max);
-        let size = if ext > 0.0 && ext.is_finite() { ext } else { 1.0 };
-        Grid { origin: min, size, bits }
+        let size = if ext > 0.0 && ext.is_finite() {
+            ext
+        } else {
+            1.0
+        };
+        Grid {
+            origin: min,
+            size,
+            bits,
+        }
     }
 
     /// Model units per grid step.
@@ -115,7 +123,8 @@ fn mean_edge_length(imp: &Imported) -> Result<f64, BuildError> {
     let mut f = 0u64;
     while f < imp.face_count {
         let mut b = [0u8; 12];
-        file.read_exact_at(&mut b, f * 12).map_err(|e| BuildError::io(fp, e))?;
+        file.read_exact_at(&mut b, f * 12)
+            .map_err(|e| BuildError::io(fp, e))?;
         let t: [u32; 3] = bytemuck::cast(b);
         let p = t.map(|i| imp.vertices.get(i).position.map(|c| c as f64));
         for k in 0..3 {
@@ -142,16 +151,28 @@ fn chunk_faces(opts: &BuildOptions) -> usize {
     ((opts.memory_bytes / 16 / 32) as usize).clamp(1 << 14, 1 << 21)
 }
 
-fn read_chunk<T: bytemuck::Pod>(r: &mut impl Read, n: usize, path: &Path) -> Result<Vec<T>, BuildError> {
+fn read_chunk<T: bytemuck::Pod>(
+    r: &mut impl Read,
+    n: usize,
+    path: &Path,
+) -> Result<Vec<T>, BuildError> {
     let mut v = vec![T::zeroed(); n];
-    r.read_exact(bytemuck::cast_slice_mut(&mut v)).map_err(|e| BuildError::io(path, e))?;
+    r.read_exact(bytemuck::cast_slice_mut(&mut v))
+        .map_err(|e| BuildError::io(path, e))?;
     Ok(v)
 }
 
-pub fn partition(imp: &Imported, tmp: &Path, opts: &BuildOptions, progress: &dyn Progress) -> Result<Partition, BuildError> {
+pub fn partition(
+    imp: &Imported,
+    tmp: &Path,
+    opts: &BuildOptions,
+    progress: &dyn Progress,
+) -> Result<Partition, BuildError> {
     let size = Grid::new(imp.bounds.min, imp.bounds.max, 1).size;
     let mean_edge = mean_edge_length(imp)?;
-    let bits = opts.quant_bits.unwrap_or_else(|| auto_quant_bits(size, mean_edge));
+    let bits = opts
+        .quant_bits
+        .unwrap_or_else(|| auto_quant_bits(size, mean_edge));
     let grid = Grid::new(imp.bounds.min, imp.bounds.max, bits);
     let (shallow, deep) = key_depths(imp.face_count, grid.bits, opts);
     let keys_path = tmp.join("keys.bin");
@@ -159,8 +180,16 @@ pub fn partition(imp: &Imported, tmp: &Path, opts: &BuildOptions, progress: &dyn
     write_keys(imp, &grid, shallow, &keys_path, opts, progress)?;
     let crowded = crowded_cells(&keys_path, imp.face_count, shallow, opts)?;
     let key_depth = if crowded.is_empty() { shallow } else { deep };
-    deepen_keys(imp, &grid, &keys_path, shallow, deep, &crowded, opts, progress)?;
-    tracing::info!(seconds = t.elapsed().as_secs_f64(), shallow, key_depth, peak_rss_mib = crate::peak_rss_mib(), "partition: keys");
+    deepen_keys(
+        imp, &grid, &keys_path, shallow, deep, &crowded, opts, progress,
+    )?;
+    tracing::info!(
+        seconds = t.elapsed().as_secs_f64(),
+        shallow,
+        key_depth,
+        peak_rss_mib = crate::peak_rss_mib(),
+        "partition: keys"
+    );
     let t = std::time::Instant::now();
     let split = choose_splits(&keys_path, imp.face_count, key_depth, opts, progress)?;
     // The conformity closure can split cells below `shallow` that were not crowded; their
@@ -171,15 +200,42 @@ pub fn partition(imp: &Imported, tmp: &Path, opts: &BuildOptions, progress: &dyn
         .map(|&(r, l, p)| prefix(dfs_key(r, l, p), shallow))
         .filter(|c| !crowded.contains(c))
         .collect();
-    deepen_keys(imp, &grid, &keys_path, shallow, deep, &closure_cells, opts, progress)?;
-    tracing::info!(seconds = t.elapsed().as_secs_f64(), splits = split.len(), peak_rss_mib = crate::peak_rss_mib(), "partition: counts and closure");
+    deepen_keys(
+        imp,
+        &grid,
+        &keys_path,
+        shallow,
+        deep,
+        &closure_cells,
+        opts,
+        progress,
+    )?;
+    tracing::info!(
+        seconds = t.elapsed().as_secs_f64(),
+        splits = split.len(),
+        peak_rss_mib = crate::peak_rss_mib(),
+        "partition: counts and closure"
+    );
     let t = std::time::Instant::now();
     let mut leaves = leaves_of(&split);
     let buckets = tmp.join("buckets.bin");
     let oversized = route(imp, &keys_path, &mut leaves, &buckets, opts, progress)?;
-    tracing::info!(seconds = t.elapsed().as_secs_f64(), leaves = leaves.len(), peak_rss_mib = crate::peak_rss_mib(), "partition: routing");
+    tracing::info!(
+        seconds = t.elapsed().as_secs_f64(),
+        leaves = leaves.len(),
+        peak_rss_mib = crate::peak_rss_mib(),
+        "partition: routing"
+    );
     let _ = std::fs::remove_file(&keys_path);
-    Ok(Partition { grid, split, leaves, buckets, oversized_leaves: oversized, key_depth, mean_edge })
+    Ok(Partition {
+        grid,
+        split,
+        leaves,
+        buckets,
+        oversized_leaves: oversized,
+        key_depth,
+        mean_edge,
+    })
 }
 
 /// How deep to key triangles: `(shallow, deep)`. Leaves of a surface sit near depth
@@ -192,16 +248,26 @@ pub fn partition(imp: &Imported, tmp: &Path, opts: &BuildOptions, progress: &dyn
 fn key_depths(faces: u64, bits: u32, opts: &BuildOptions) -> (u8, u8) {
     let leaves = (faces as f64 / opts.leaf_triangles as f64).max(1.0);
     let limit = 36.min(3 * bits).min(MAX_LEVEL as u32);
-    let shallow = ((1.5 * leaves.log2()).round() as u32 + 6).clamp(12, 36).min(limit);
+    let shallow = ((1.5 * leaves.log2()).round() as u32 + 6)
+        .clamp(12, 36)
+        .min(limit);
     let deep = (shallow + 12).min(limit);
     (shallow as u8, deep as u8)
 }
 
 /// Cells at depth `shallow` that hold more than a leaf's worth of triangles.
-fn crowded_cells(keys: &Path, faces: u64, shallow: u8, opts: &BuildOptions) -> Result<HashSet<u64>, BuildError> {
+fn crowded_cells(
+    keys: &Path,
+    faces: u64,
+    shallow: u8,
+    opts: &BuildOptions,
+) -> Result<HashSet<u64>, BuildError> {
     let chunk = chunk_faces(opts);
     let mut counts: HashMap<u64, u64> = HashMap::new();
-    let mut r = BufReader::with_capacity(1 << 20, File::open(keys).map_err(|e| BuildError::io(keys, e))?);
+    let mut r = BufReader::with_capacity(
+        1 << 20,
+        File::open(keys).map_err(|e| BuildError::io(keys, e))?,
+    );
     let mut done = 0u64;
     while done < faces {
         let n = ((faces - done) as usize).min(chunk);
@@ -211,7 +277,11 @@ fn crowded_cells(keys: &Path, faces: u64, shallow: u8, opts: &BuildOptions) -> R
         done += n as u64;
     }
     let cap = opts.leaf_triangles as u64;
-    Ok(counts.into_iter().filter(|&(_, c)| c > cap).map(|(p, _)| p).collect())
+    Ok(counts
+        .into_iter()
+        .filter(|&(_, c)| c > cap)
+        .map(|(p, _)| p)
+        .collect())
 }
 
 /// Re-key at `deep` the faces whose cell at depth `shallow` is in `cells`. Deeper keys
@@ -234,27 +304,36 @@ fn deepen_keys(
     let chunk = chunk_faces(opts).min(VERTEX_PASS_FACES);
     let faces = imp.face_count;
     progress.stage("locate (deeper)", faces);
-    let kf = std::fs::OpenOptions::new().read(true).write(true).open(keys).map_err(|e| BuildError::io(keys, e))?;
+    let kf = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .open(keys)
+        .map_err(|e| BuildError::io(keys, e))?;
     let fp = &imp.faces_path;
     let ff = File::open(fp).map_err(|e| BuildError::io(fp, e))?;
     let mut done = 0u64;
     while done < faces {
         let n = ((faces - done) as usize).min(chunk);
         let mut k = vec![0u64; n];
-        kf.read_exact_at(bytemuck::cast_slice_mut(&mut k), done * 8).map_err(|e| BuildError::io(keys, e))?;
+        kf.read_exact_at(bytemuck::cast_slice_mut(&mut k), done * 8)
+            .map_err(|e| BuildError::io(keys, e))?;
         if k.iter().any(|&key| crowded.contains(&prefix(key, shallow))) {
             let mut f = vec![[0u32; 3]; n];
-            ff.read_exact_at(bytemuck::cast_slice_mut(&mut f), done * 12).map_err(|e| BuildError::io(fp, e))?;
-            k.par_chunks_mut(4096).zip(f.par_chunks(4096)).for_each(|(ks, fs)| {
-                let mut loc = Locator::new(deep, 3);
-                for (key, t) in ks.iter_mut().zip(fs) {
-                    if crowded.contains(&prefix(*key, shallow)) {
-                        let q = t.map(|i| grid.quantize(imp.vertices.get(i).position));
-                        *key = loc.locate(grid.centroid3(q)).unwrap_or(*key);
+            ff.read_exact_at(bytemuck::cast_slice_mut(&mut f), done * 12)
+                .map_err(|e| BuildError::io(fp, e))?;
+            k.par_chunks_mut(4096)
+                .zip(f.par_chunks(4096))
+                .for_each(|(ks, fs)| {
+                    let mut loc = Locator::new(deep, 3);
+                    for (key, t) in ks.iter_mut().zip(fs) {
+                        if crowded.contains(&prefix(*key, shallow)) {
+                            let q = t.map(|i| grid.quantize(imp.vertices.get(i).position));
+                            *key = loc.locate(grid.centroid3(q)).unwrap_or(*key);
+                        }
                     }
-                }
-            });
-            kf.write_all_at(bytemuck::cast_slice(&k), done * 8).map_err(|e| BuildError::io(keys, e))?;
+                });
+            kf.write_all_at(bytemuck::cast_slice(&k), done * 8)
+                .map_err(|e| BuildError::io(keys, e))?;
             imp.vertices.release();
         }
         done += n as u64;
@@ -268,11 +347,22 @@ fn deepen_keys(
 }
 
 /// Pass 1: one depth-first key per face.
-fn write_keys(imp: &Imported, grid: &Grid, depth: u8, out: &Path, opts: &BuildOptions, progress: &dyn Progress) -> Result<(), BuildError> {
+fn write_keys(
+    imp: &Imported,
+    grid: &Grid,
+    depth: u8,
+    out: &Path,
+    opts: &BuildOptions,
+    progress: &dyn Progress,
+) -> Result<(), BuildError> {
     progress.stage("locate", imp.face_count);
     let fp = &imp.faces_path;
-    let mut faces = BufReader::with_capacity(1 << 20, File::open(fp).map_err(|e| BuildError::io(fp, e))?);
-    let mut keys = BufWriter::with_capacity(1 << 20, File::create(out).map_err(|e| BuildError::io(out, e))?);
+    let mut faces =
+        BufReader::with_capacity(1 << 20, File::open(fp).map_err(|e| BuildError::io(fp, e))?);
+    let mut keys = BufWriter::with_capacity(
+        1 << 20,
+        File::create(out).map_err(|e| BuildError::io(out, e))?,
+    );
     // Small chunks: the vertex store's pages are released after each (see
     // `VertexStore::release`), and each fault maps up to 16 neighbouring pages.
     let chunk = chunk_faces(opts).min(VERTEX_PASS_FACES);
@@ -295,7 +385,8 @@ fn write_keys(imp: &Imported, grid: &Grid, depth: u8, out: &Path, opts: &BuildOp
                     .collect::<Vec<_>>()
             })
             .collect();
-        keys.write_all(bytemuck::cast_slice(&k)).map_err(|e| BuildError::io(out, e))?;
+        keys.write_all(bytemuck::cast_slice(&k))
+            .map_err(|e| BuildError::io(out, e))?;
         done += n as u64;
         progress.advance(n as u64);
         if progress.cancelled() {
@@ -303,7 +394,8 @@ fn write_keys(imp: &Imported, grid: &Grid, depth: u8, out: &Path, opts: &BuildOp
         }
         imp.vertices.release();
     }
-    keys.into_inner().map_err(|e| BuildError::io(out, e.into_error()))?;
+    keys.into_inner()
+        .map_err(|e| BuildError::io(out, e.into_error()))?;
     progress.finish_stage();
     Ok(())
 }
@@ -323,7 +415,13 @@ fn id_of_prefix(p: u64, depth: u8) -> TetId {
 }
 
 /// Pass 2: counts, a band of levels at a time, then the conforming set of splits.
-fn choose_splits(keys: &Path, faces: u64, depth: u8, opts: &BuildOptions, progress: &dyn Progress) -> Result<HashSet<TetId>, BuildError> {
+fn choose_splits(
+    keys: &Path,
+    faces: u64,
+    depth: u8,
+    opts: &BuildOptions,
+    progress: &dyn Progress,
+) -> Result<HashSet<TetId>, BuildError> {
     // 12 levels per pass keeps the count maps small (a few million entries at most).
     const BAND: u8 = 12;
     let cap = opts.leaf_triangles as u64;
@@ -336,7 +434,10 @@ fn choose_splits(keys: &Path, faces: u64, depth: u8, opts: &BuildOptions, progre
         let to = (from + BAND).min(depth);
         progress.stage(&format!("count levels {from}..{to}"), faces);
         let mut counts: HashMap<u64, u64> = HashMap::new();
-        let mut r = BufReader::with_capacity(1 << 20, File::open(keys).map_err(|e| BuildError::io(keys, e))?);
+        let mut r = BufReader::with_capacity(
+            1 << 20,
+            File::open(keys).map_err(|e| BuildError::io(keys, e))?,
+        );
         let mut done = 0u64;
         while done < faces {
             let n = ((faces - done) as usize).min(chunk);
@@ -415,7 +516,10 @@ fn ensure_split(t: &Tet, split: &mut HashSet<TetId>) {
 /// Children of split tetrahedra that are not split themselves, plus unsplit roots, in
 /// depth-first order (empty ones are dropped after routing).
 fn leaves_of(split: &HashSet<TetId>) -> Vec<Leaf> {
-    let mut ids: Vec<TetId> = (0..6u8).map(|r| (r, 0u8, 0u64)).filter(|id| !split.contains(id)).collect();
+    let mut ids: Vec<TetId> = (0..6u8)
+        .map(|r| (r, 0u8, 0u64))
+        .filter(|id| !split.contains(id))
+        .collect();
     for &(r, l, p) in split {
         for c in 0..2u64 {
             let id = (r, l + 1, p | (c << l));
@@ -425,13 +529,32 @@ fn leaves_of(split: &HashSet<TetId>) -> Vec<Leaf> {
         }
     }
     ids.sort_by_key(|&(r, l, p)| dfs_key(r, l, p));
-    ids.into_iter().map(|id| Leaf { id, first_face: 0, face_count: 0 }).collect()
+    ids.into_iter()
+        .map(|id| Leaf {
+            id,
+            first_face: 0,
+            face_count: 0,
+        })
+        .collect()
 }
 
 /// Pass 3: count per leaf, then write faces grouped by leaf.
-fn route(imp: &Imported, keys: &Path, leaves: &mut Vec<Leaf>, out: &Path, opts: &BuildOptions, progress: &dyn Progress) -> Result<u64, BuildError> {
-    let starts: Vec<u64> = leaves.iter().map(|l| dfs_key(l.id.0, l.id.1, l.id.2)).collect();
-    let ends: Vec<u64> = leaves.iter().map(|l| dfs_range(l.id.0, l.id.1, l.id.2).1).collect();
+fn route(
+    imp: &Imported,
+    keys: &Path,
+    leaves: &mut Vec<Leaf>,
+    out: &Path,
+    opts: &BuildOptions,
+    progress: &dyn Progress,
+) -> Result<u64, BuildError> {
+    let starts: Vec<u64> = leaves
+        .iter()
+        .map(|l| dfs_key(l.id.0, l.id.1, l.id.2))
+        .collect();
+    let ends: Vec<u64> = leaves
+        .iter()
+        .map(|l| dfs_range(l.id.0, l.id.1, l.id.2).1)
+        .collect();
     let find = |key: u64| -> usize {
         let i = starts.partition_point(|&s| s <= key);
         debug_assert!(i > 0 && key < ends[i - 1], "leaves tile the key space");
@@ -443,7 +566,10 @@ fn route(imp: &Imported, keys: &Path, leaves: &mut Vec<Leaf>, out: &Path, opts: 
     progress.stage("route (count)", faces);
     let mut counts = vec![0u64; leaves.len()];
     {
-        let mut r = BufReader::with_capacity(1 << 20, File::open(keys).map_err(|e| BuildError::io(keys, e))?);
+        let mut r = BufReader::with_capacity(
+            1 << 20,
+            File::open(keys).map_err(|e| BuildError::io(keys, e))?,
+        );
         let mut done = 0u64;
         while done < faces {
             let n = ((faces - done) as usize).min(chunk);
@@ -471,16 +597,25 @@ fn route(imp: &Imported, keys: &Path, leaves: &mut Vec<Leaf>, out: &Path, opts: 
     // Write: sort each chunk by leaf, one positional write per run.
     progress.stage("route (write)", faces);
     let file = File::create(out).map_err(|e| BuildError::io(out, e))?;
-    file.set_len(faces * 12).map_err(|e| BuildError::io(out, e))?;
+    file.set_len(faces * 12)
+        .map_err(|e| BuildError::io(out, e))?;
     let fp = &imp.faces_path;
-    let mut kr = BufReader::with_capacity(1 << 20, File::open(keys).map_err(|e| BuildError::io(keys, e))?);
-    let mut fr = BufReader::with_capacity(1 << 20, File::open(fp).map_err(|e| BuildError::io(fp, e))?);
+    let mut kr = BufReader::with_capacity(
+        1 << 20,
+        File::open(keys).map_err(|e| BuildError::io(keys, e))?,
+    );
+    let mut fr =
+        BufReader::with_capacity(1 << 20, File::open(fp).map_err(|e| BuildError::io(fp, e))?);
     let mut done = 0u64;
     while done < faces {
         let n = ((faces - done) as usize).min(chunk);
         let k: Vec<u64> = read_chunk(&mut kr, n, keys)?;
         let f: Vec<[u32; 3]> = read_chunk(&mut fr, n, fp)?;
-        let mut order: Vec<(u32, u32)> = k.par_iter().enumerate().map(|(i, &key)| (find(key) as u32, i as u32)).collect();
+        let mut order: Vec<(u32, u32)> = k
+            .par_iter()
+            .enumerate()
+            .map(|(i, &key)| (find(key) as u32, i as u32))
+            .collect();
         order.par_sort_unstable();
         let mut i = 0;
         while i < order.len() {
@@ -490,7 +625,8 @@ fn route(imp: &Imported, keys: &Path, leaves: &mut Vec<Leaf>, out: &Path, opts: 
                 run.push(f[order[i].1 as usize]);
                 i += 1;
             }
-            file.write_all_at(bytemuck::cast_slice(&run), cursor[leaf] * 12).map_err(|e| BuildError::io(out, e))?;
+            file.write_all_at(bytemuck::cast_slice(&run), cursor[leaf] * 12)
+                .map_err(|e| BuildError::io(out, e))?;
             cursor[leaf] += run.len() as u64;
         }
         done += n as u64;
@@ -507,7 +643,11 @@ fn route(imp: &Imported, keys: &Path, leaves: &mut Vec<Leaf>, out: &Path, opts: 
 }
 
 /// Read one leaf's faces from the bucket file.
-pub fn read_leaf_faces(buckets: &File, path: &Path, leaf: &Leaf) -> Result<Vec<[u32; 3]>, BuildError> {
+pub fn read_leaf_faces(
+    buckets: &File,
+    path: &Path,
+    leaf: &Leaf,
+) -> Result<Vec<[u32; 3]>, BuildError> {
     let mut v = vec![[0u32; 3]; leaf.face_count as usize];
     buckets
         .read_exact_at(bytemuck::cast_slice_mut(&mut v), leaf.first_face * 12)
@@ -575,7 +715,11 @@ mod tests {
                 // Squaring the parameter crowds vertices towards 0.
                 let (u, v) = ((i as f32 / n as f32).powi(3), (j as f32 / n as f32).powi(3));
                 let z = 0.05 * (7.0 * u).sin() * (5.0 * v).cos();
-                w.write_vertex(&Vertex { position: [u, v, z], ..Default::default() }).unwrap();
+                w.write_vertex(&Vertex {
+                    position: [u, v, z],
+                    ..Default::default()
+                })
+                .unwrap();
             }
         }
         for j in 0..n {
@@ -595,7 +739,11 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let input = dir.path().join("grid.ply");
         write_uneven_grid(&input, 120);
-        let opts = BuildOptions { leaf_triangles: 64, node_triangles: 32, ..Default::default() };
+        let opts = BuildOptions {
+            leaf_triangles: 64,
+            node_triangles: 32,
+            ..Default::default()
+        };
         let imp = crate::import::import(&input, dir.path(), &crate::NoProgress).unwrap();
         let part = partition(&imp, dir.path(), &opts, &crate::NoProgress).unwrap();
         assert!(part.leaves.len() > 50);
@@ -613,7 +761,10 @@ mod tests {
             }
         }
         assert_eq!(total, imp.face_count);
-        assert!(max_level > part.key_depth.min(60) / 2, "want deep leaves, got {max_level}");
+        assert!(
+            max_level > part.key_depth.min(60) / 2,
+            "want deep leaves, got {max_level}"
+        );
     }
 
     #[test]

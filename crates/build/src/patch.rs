@@ -59,8 +59,14 @@ impl WorkPatch {
         let ic = u32::from_le_bytes(b.get(4..8)?.try_into().ok()?) as usize;
         let vb = b.get(8..8 + vc * 36)?;
         let ib = b.get(8 + vc * 36..8 + vc * 36 + ic * 4)?;
-        let vertices = vb.chunks_exact(36).map(bytemuck::pod_read_unaligned).collect();
-        let indices = ib.chunks_exact(4).map(bytemuck::pod_read_unaligned).collect();
+        let vertices = vb
+            .chunks_exact(36)
+            .map(bytemuck::pod_read_unaligned)
+            .collect();
+        let indices = ib
+            .chunks_exact(4)
+            .map(bytemuck::pod_read_unaligned)
+            .collect();
         Some(WorkPatch { vertices, indices })
     }
 
@@ -105,7 +111,11 @@ pub fn grid_to_local(q: [u32; 3], step: f64) -> [f64; 3] {
 pub fn face_normal(a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> [f64; 3] {
     let u = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
     let v = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
-    [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]]
+    [
+        u[1] * v[2] - u[2] * v[1],
+        u[2] * v[0] - u[0] * v[2],
+        u[0] * v[1] - u[1] * v[0],
+    ]
 }
 
 /// Welds vertices with identical bytes into one indexed mesh, remembering where every
@@ -118,7 +128,10 @@ pub struct Welder {
 
 impl Welder {
     pub fn with_capacity(n: usize) -> Welder {
-        Welder { map: FxHashMap::with_capacity_and_hasher(n, Default::default()), vertices: Vec::with_capacity(n) }
+        Welder {
+            map: FxHashMap::with_capacity_and_hasher(n, Default::default()),
+            vertices: Vec::with_capacity(n),
+        }
     }
 
     /// Index of `v` in the welded mesh (added if new).
@@ -148,7 +161,13 @@ pub fn remove_bad_triangles(indices: &mut Vec<u32>, vertices: &[WorkVertex]) -> 
     let mut out = Vec::with_capacity(indices.len());
     for t in indices.chunks_exact(3) {
         let q = |k: usize| vertices[t[k] as usize].q;
-        if t[0] == t[1] || t[1] == t[2] || t[0] == t[2] || q(0) == q(1) || q(1) == q(2) || q(0) == q(2) {
+        if t[0] == t[1]
+            || t[1] == t[2]
+            || t[0] == t[2]
+            || q(0) == q(1)
+            || q(1) == q(2)
+            || q(0) == q(2)
+        {
             counts.degenerate += 1;
             continue;
         }
@@ -170,12 +189,18 @@ mod tests {
     use super::*;
 
     fn v(x: u32) -> WorkVertex {
-        WorkVertex { q: [x, 0, 0], ..Default::default() }
+        WorkVertex {
+            q: [x, 0, 0],
+            ..Default::default()
+        }
     }
 
     #[test]
     fn spool_bytes_round_trip() {
-        let p = WorkPatch { vertices: vec![v(1), v(2), v(3)], indices: vec![0, 1, 2] };
+        let p = WorkPatch {
+            vertices: vec![v(1), v(2), v(3)],
+            indices: vec![0, 1, 2],
+        };
         assert_eq!(WorkPatch::from_bytes(&p.to_bytes()), Some(p));
         assert_eq!(WorkPatch::from_bytes(&[1, 0, 0]), None);
     }
@@ -188,7 +213,11 @@ mod tests {
         assert_eq!(w.add(&v(1)), 0);
         let mut c = v(1);
         c.color = [1, 2, 3, 4];
-        assert_eq!(w.add(&c), 2, "same position, other colour: a seam, not the same vertex");
+        assert_eq!(
+            w.add(&c),
+            2,
+            "same position, other colour: a seam, not the same vertex"
+        );
     }
 
     #[test]
@@ -199,6 +228,13 @@ mod tests {
         let mut idx = vec![0, 1, 2, 1, 2, 0, 0, 0, 1, 2, 1, 0, 0, 2, 3];
         let c = remove_bad_triangles(&mut idx, &verts);
         assert_eq!(idx, vec![0, 1, 2, 2, 1, 0]);
-        assert_eq!(c, CleanupCounts { degenerate: 2, duplicate: 1 }, "(0, 2, 3) has two corners on one point");
+        assert_eq!(
+            c,
+            CleanupCounts {
+                degenerate: 2,
+                duplicate: 1
+            },
+            "(0, 2, 3) has two corners on one point"
+        );
     }
 }

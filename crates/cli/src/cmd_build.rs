@@ -52,7 +52,8 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     };
     let bars = Bars::new(a.quiet || a.json);
     crate::progress::install_interrupt_handler();
-    let r = build(&a.input, &a.output, &opts, &bars).with_context(|| format!("building {}", a.output.display()))?;
+    let r = build(&a.input, &a.output, &opts, &bars)
+        .with_context(|| format!("building {}", a.output.display()))?;
     if a.json {
         println!("{}", serde_json::to_string_pretty(&report_json(&r))?);
     } else {
@@ -92,22 +93,45 @@ pub fn report_json(r: &BuildReport) -> serde_json::Value {
 
 fn print_report(out: &std::path::Path, r: &BuildReport) {
     println!("built {}", out.display());
-    println!("  input        {} triangles, {} vertices{}", r.input_triangles, r.input_vertices, if r.normals_computed { " (normals computed)" } else { "" });
-    println!("  hierarchy    {} nodes ({} leaves), {} levels, {} triangles stored", r.nodes, r.leaves, r.levels, r.stored_triangles);
-    println!("  output       {} bytes, {:.2} bytes/input triangle", r.output_bytes, r.bytes_per_input_triangle());
+    println!(
+        "  input        {} triangles, {} vertices{}",
+        r.input_triangles,
+        r.input_vertices,
+        if r.normals_computed {
+            " (normals computed)"
+        } else {
+            ""
+        }
+    );
+    println!(
+        "  hierarchy    {} nodes ({} leaves), {} levels, {} triangles stored",
+        r.nodes, r.leaves, r.levels, r.stored_triangles
+    );
+    println!(
+        "  output       {} bytes, {:.2} bytes/input triangle",
+        r.output_bytes,
+        r.bytes_per_input_triangle()
+    );
     println!(
         "  quantization {} bits, step {:.3e}, max error {:.3e} (model units; mean edge {:.3e})",
         r.quant_bits, r.quant_step, r.quant_error_max, r.mean_edge
     );
     println!("  coarsest error {:.4e} (model units)", r.max_error);
-    println!("  time         {:.2} s, {:.0} input triangles/s", r.seconds, r.triangles_per_second());
+    println!(
+        "  time         {:.2} s, {:.0} input triangles/s",
+        r.seconds,
+        r.triangles_per_second()
+    );
     if let Some(rss) = tessera_build::peak_rss_bytes() {
         println!("  peak RSS     {:.1} MiB", rss as f64 / (1 << 20) as f64);
     }
     for (n, s) in &r.stage_seconds {
         println!("    {n:<16} {s:.2} s");
     }
-    let w = r.degenerate_triangles_removed + r.duplicate_triangles_removed + r.import.degenerate_faces_skipped + r.import.short_faces_skipped;
+    let w = r.degenerate_triangles_removed
+        + r.duplicate_triangles_removed
+        + r.import.degenerate_faces_skipped
+        + r.import.short_faces_skipped;
     if w > 0 || r.oversized_leaves > 0 {
         println!(
             "  warnings     {} degenerate and {} duplicate triangles removed, {} bad faces skipped at import, {} leaves over the triangle limit",

@@ -16,7 +16,8 @@ use std::process::ExitCode;
 use tessera_format::{Model, PatchData};
 use tessera_mesh::{Attributes, PlyWriter, PlyWriterOptions, Vertex};
 use tessera_select::{
-    edge_report, merge_patches, select_cut, uniform_level_cut, Camera, CutMesh, Criterion, EdgeReport, PatchRef,
+    edge_report, merge_patches, select_cut, uniform_level_cut, Camera, Criterion, CutMesh,
+    EdgeReport, PatchRef,
 };
 
 #[derive(clap::Args)]
@@ -85,7 +86,10 @@ fn select(m: &Model, a: &Args) -> anyhow::Result<(Vec<u32>, serde_json::Value)> 
                 h.level_count.saturating_sub(1)
             );
         }
-        return Ok((uniform_level_cut(m.nodes(), level as u8), json!({ "level": level })));
+        return Ok((
+            uniform_level_cut(m.nodes(), level as u8),
+            json!({ "level": level }),
+        ));
     }
     let (Some(cam_path), Some(tolerance)) = (&a.camera, a.tolerance) else {
         bail!("one of --max-error, --camera (with --tolerance) or --level is required");
@@ -96,7 +100,15 @@ fn select(m: &Model, a: &Args) -> anyhow::Result<(Vec<u32>, serde_json::Value)> 
     // CameraError already names the file and the field.
     let camera = Camera::from_json_file(cam_path)?;
     let cull = !a.no_cull;
-    let cut = select_cut(h, m.nodes(), &Criterion::View { camera, tolerance_px: tolerance, cull });
+    let cut = select_cut(
+        h,
+        m.nodes(),
+        &Criterion::View {
+            camera,
+            tolerance_px: tolerance,
+            cull,
+        },
+    );
     Ok((
         cut.nodes,
         json!({ "camera": cam_path.display().to_string(), "tolerance_px": tolerance, "cull": cull }),
@@ -109,7 +121,10 @@ pub fn extract_nodes(m: &Model, nodes: &[u32]) -> anyhow::Result<Extracted> {
     let patches: Vec<PatchData> = nodes
         .par_iter()
         // The format error names the node ("patch checksum mismatch for node 12 ...").
-        .map(|&i| m.decode_patch(i as usize).with_context(|| format!("{}", m.path().display())))
+        .map(|&i| {
+            m.decode_patch(i as usize)
+                .with_context(|| format!("{}", m.path().display()))
+        })
         .collect::<anyhow::Result<_>>()?;
     let mesh = merge_patches(patches.iter().map(|p| PatchRef {
         positions: &p.positions,
@@ -120,7 +135,11 @@ pub fn extract_nodes(m: &Model, nodes: &[u32]) -> anyhow::Result<Extracted> {
     }));
     drop(patches);
     let edges = edge_report(&mesh.indices, &mesh.positions);
-    Ok(Extracted { nodes: nodes.to_vec(), mesh, edges })
+    Ok(Extracted {
+        nodes: nodes.to_vec(),
+        mesh,
+        edges,
+    })
 }
 
 /// Writes a merged cut as a binary PLY in model coordinates (atomic).
@@ -139,7 +158,10 @@ fn write_ply(m: &Model, mesh: &CutMesh, path: &Path, comments: Vec<String>) -> a
     let mut w = PlyWriter::create(path, &opts)?;
     for (i, &q) in mesh.positions.iter().enumerate() {
         let p = m.model_position(q);
-        let mut v = Vertex { position: [p[0] as f32, p[1] as f32, p[2] as f32], ..Vertex::default() };
+        let mut v = Vertex {
+            position: [p[0] as f32, p[1] as f32, p[2] as f32],
+            ..Vertex::default()
+        };
         if attributes.normals {
             v.normal = mesh.normals[i];
         }
@@ -166,10 +188,15 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         format!("tessera extract of {}", a.model.display()),
         format!("cut {criterion}, {} nodes", x.nodes.len()),
     ];
-    write_ply(&m, &x.mesh, &a.output, comments).with_context(|| format!("writing {}", a.output.display()))?;
+    write_ply(&m, &x.mesh, &a.output, comments)
+        .with_context(|| format!("writing {}", a.output.display()))?;
 
     let all = m.nodes();
-    let max_node_error = x.nodes.iter().map(|&i| all[i as usize].error).fold(0.0f32, f32::max);
+    let max_node_error = x
+        .nodes
+        .iter()
+        .map(|&i| all[i as usize].error)
+        .fold(0.0f32, f32::max);
     let (lmin, lmax) = x
         .nodes
         .iter()
@@ -201,16 +228,27 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         if x.nodes.is_empty() {
             println!("  nodes      0 (everything culled)");
         } else {
-            println!("  nodes      {} (levels {lmin}..={lmax}, largest error {max_node_error:.4e})", x.nodes.len());
+            println!(
+                "  nodes      {} (levels {lmin}..={lmax}, largest error {max_node_error:.4e})",
+                x.nodes.len()
+            );
         }
-        println!("  mesh       {} triangles, {} vertices", x.mesh.triangle_count(), x.mesh.positions.len());
+        println!(
+            "  mesh       {} triangles, {} vertices",
+            x.mesh.triangle_count(),
+            x.mesh.positions.len()
+        );
         println!(
             "  edges      {} edges, {} boundary, {} non-manifold, {} degenerate triangles{}",
             e.edges,
             e.boundary_edges,
             e.nonmanifold_edges,
             e.degenerate_triangles,
-            if e.is_closed_manifold() { " (closed manifold)" } else { "" }
+            if e.is_closed_manifold() {
+                " (closed manifold)"
+            } else {
+                ""
+            }
         );
     }
     Ok(ExitCode::SUCCESS)

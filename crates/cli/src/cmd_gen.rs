@@ -75,30 +75,66 @@ fn parse_count(s: &str) -> Result<u64, String> {
 
 pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     let (quiet, output) = match &a.what {
-        What::Sphere { quiet, output, .. } | What::Terrain { quiet, output, .. } | What::Tile { quiet, output, .. } => {
-            (*quiet, output.clone())
-        }
+        What::Sphere { quiet, output, .. }
+        | What::Terrain { quiet, output, .. }
+        | What::Tile { quiet, output, .. } => (*quiet, output.clone()),
     };
-    let bar = if quiet { ProgressBar::hidden() } else { ProgressBar::new(1000) };
+    let bar = if quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new(1000)
+    };
     if let Ok(s) = ProgressStyle::with_template("{msg:>10} [{bar:40}] {percent}% ({eta})") {
         bar.set_style(s.progress_chars("=> "));
     }
     bar.set_message("generate");
     let tick = |p: GenProgress| bar.set_position((p.fraction() * 1000.0) as u64);
     let report = match a.what {
-        What::Sphere { triangles, seed, colors, noise, .. } => {
-            tessera_gen::write_sphere_with_progress(&output, &SphereOptions { triangles, seed, colors, noise }, Some(&tick))
-        }
-        What::Terrain { triangles, seed, colors, .. } => {
-            tessera_gen::write_terrain_with_progress(&output, &TerrainOptions { triangles, seed, colors }, Some(&tick))
-        }
-        What::Tile { input, copies, .. } => {
-            tessera_gen::write_tiled_with_progress(&input, &output, &TileOptions { copies }, Some(&tick))
-        }
+        What::Sphere {
+            triangles,
+            seed,
+            colors,
+            noise,
+            ..
+        } => tessera_gen::write_sphere_with_progress(
+            &output,
+            &SphereOptions {
+                triangles,
+                seed,
+                colors,
+                noise,
+            },
+            Some(&tick),
+        ),
+        What::Terrain {
+            triangles,
+            seed,
+            colors,
+            ..
+        } => tessera_gen::write_terrain_with_progress(
+            &output,
+            &TerrainOptions {
+                triangles,
+                seed,
+                colors,
+            },
+            Some(&tick),
+        ),
+        What::Tile { input, copies, .. } => tessera_gen::write_tiled_with_progress(
+            &input,
+            &output,
+            &TileOptions { copies },
+            Some(&tick),
+        ),
     }
     .with_context(|| format!("generating {}", output.display()))?;
     bar.finish_and_clear();
-    println!("wrote {}: {} triangles, {} vertices", output.display(), report.triangles, report.vertices);
+    println!(
+        "wrote {}: {} triangles, {} vertices",
+        output.display(),
+        report.triangles,
+        report.vertices
+    );
     Ok(ExitCode::SUCCESS)
 }
 

@@ -80,20 +80,65 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         return Ok(ExitCode::SUCCESS);
     }
     let h = m.header();
-    println!("{}  (format v{}, {} bytes)", a.model.display(), h.version, h.file_bytes);
-    println!("  attributes      {}", j["attributes"].as_array().map(|a| a.iter().filter_map(|x| x.as_str()).collect::<Vec<_>>().join(", ")).unwrap_or_default());
-    println!("  input           {} triangles, {} vertices", h.input_triangles, h.input_vertices);
-    println!("  nodes           {} ({} roots, {} leaves), {} levels", h.node_count, h.root_count, j["leaves"], h.level_count);
-    println!("  stored          {} triangles, {} vertices (leaves hold {} triangles)", j["triangles"], j["vertices"], j["leaf_triangles"]);
-    println!("  error           {} .. {} (model units, saturated)", j["error"]["min_internal"], h.max_error);
-    println!("  quantization    {} bits, step {:.4e}, max error {:.4e}", h.quant_bits, m.quant_step(), m.quant_step() * 3f64.sqrt() / 2.0);
-    println!("  bounding sphere center [{:.6}, {:.6}, {:.6}] radius {:.6}", h.bounding_sphere[0], h.bounding_sphere[1], h.bounding_sphere[2], h.bounding_sphere[3]);
-    println!("  bytes           header 256, node table {}, patches {}", h.node_count * 128, h.patch_data_bytes);
-    println!("  bytes/input tri {:.3}", j["bytes_per_input_triangle"].as_f64().unwrap_or(0.0));
+    println!(
+        "{}  (format v{}, {} bytes)",
+        a.model.display(),
+        h.version,
+        h.file_bytes
+    );
+    println!(
+        "  attributes      {}",
+        j["attributes"]
+            .as_array()
+            .map(|a| a
+                .iter()
+                .filter_map(|x| x.as_str())
+                .collect::<Vec<_>>()
+                .join(", "))
+            .unwrap_or_default()
+    );
+    println!(
+        "  input           {} triangles, {} vertices",
+        h.input_triangles, h.input_vertices
+    );
+    println!(
+        "  nodes           {} ({} roots, {} leaves), {} levels",
+        h.node_count, h.root_count, j["leaves"], h.level_count
+    );
+    println!(
+        "  stored          {} triangles, {} vertices (leaves hold {} triangles)",
+        j["triangles"], j["vertices"], j["leaf_triangles"]
+    );
+    println!(
+        "  error           {} .. {} (model units, saturated)",
+        j["error"]["min_internal"], h.max_error
+    );
+    println!(
+        "  quantization    {} bits, step {:.4e}, max error {:.4e}",
+        h.quant_bits,
+        m.quant_step(),
+        m.quant_step() * 3f64.sqrt() / 2.0
+    );
+    println!(
+        "  bounding sphere center [{:.6}, {:.6}, {:.6}] radius {:.6}",
+        h.bounding_sphere[0], h.bounding_sphere[1], h.bounding_sphere[2], h.bounding_sphere[3]
+    );
+    println!(
+        "  bytes           header 256, node table {}, patches {}",
+        h.node_count * 128,
+        h.patch_data_bytes
+    );
+    println!(
+        "  bytes/input tri {:.3}",
+        j["bytes_per_input_triangle"].as_f64().unwrap_or(0.0)
+    );
     println!("  level   nodes   triangles   patch bytes");
     if let Some(levels) = j["per_level"].as_array() {
         for l in levels {
-            println!("  {:>5} {:>7} {:>11} {:>13}", l["level"], l["nodes"], l["triangles"], l["patch_bytes"]);
+            println!(
+                "  {:>5} {:>7} {:>11} {:>13}",
+                l["level"], l["nodes"], l["triangles"], l["patch_bytes"]
+            );
         }
     }
     Ok(ExitCode::SUCCESS)

@@ -21,13 +21,19 @@ pub fn verify_diamonds(m: &Model) -> Vec<String> {
     let mut by_key: HashMap<DiamondKey, (f32, [f32; 4], usize)> = HashMap::new();
     for (i, n) in m.nodes().iter().enumerate() {
         let Some(t) = Tet::from_path(n.root, n.level, n.tet_path) else {
-            problems.push(format!("node {i}: impossible tetrahedron (root {}, level {})", n.root, n.level));
+            problems.push(format!(
+                "node {i}: impossible tetrahedron (root {}, level {})",
+                n.root, n.level
+            ));
             continue;
         };
         let key = t.diamond();
         if let Some((k, _, first)) = by_id.get(&n.diamond) {
             if *k != key {
-                problems.push(format!("node {i}: shares diamond id {} with node {first} but not its refinement edge", n.diamond));
+                problems.push(format!(
+                    "node {i}: shares diamond id {} with node {first} but not its refinement edge",
+                    n.diamond
+                ));
             }
         } else {
             by_id.insert(n.diamond, (key, n.error, i));
@@ -57,7 +63,11 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     count += geo.len();
     problems.extend(geo.into_iter().take(100));
     if count == 0 {
-        println!("{}: valid ({} nodes checked)", a.model.display(), r.checked_nodes);
+        println!(
+            "{}: valid ({} nodes checked)",
+            a.model.display(),
+            r.checked_nodes
+        );
         return Ok(ExitCode::SUCCESS);
     }
     for p in &problems {

@@ -7,6 +7,7 @@ mod cmd_build;
 mod cmd_extract;
 mod cmd_gen;
 mod cmd_info;
+mod cmd_render;
 mod cmd_verify;
 mod progress;
 
@@ -14,7 +15,11 @@ use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
 #[derive(Parser)]
-#[command(name = "tessera", version, about = "Multiresolution rendering of huge triangle meshes")]
+#[command(
+    name = "tessera",
+    version,
+    about = "Multiresolution rendering of huge triangle meshes"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -32,12 +37,15 @@ enum Command {
     Extract(cmd_extract::Args),
     /// Generate deterministic test meshes (binary PLY).
     Gen(cmd_gen::Args),
+    /// Render a camera path or an orbit to PNG frames with per-frame statistics.
+    Render(cmd_render::Args),
 }
 
 fn main() -> ExitCode {
     tracing_subscriber::fmt()
         .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_env("TESSERA_LOG").unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
+            tracing_subscriber::EnvFilter::try_from_env("TESSERA_LOG")
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
         )
         .with_writer(std::io::stderr)
         .with_target(false)
@@ -49,6 +57,7 @@ fn main() -> ExitCode {
         Command::Verify(a) => cmd_verify::run(a),
         Command::Extract(a) => cmd_extract::run(a),
         Command::Gen(a) => cmd_gen::run(a),
+        Command::Render(a) => cmd_render::run(a),
     };
     match result {
         Ok(code) => code,
@@ -75,7 +84,10 @@ pub fn parse_bytes(s: &str) -> Result<u64, String> {
         }
         _ => (s, 1),
     };
-    let n: f64 = num.trim().parse().map_err(|_| format!("not a size: {s:?}"))?;
+    let n: f64 = num
+        .trim()
+        .parse()
+        .map_err(|_| format!("not a size: {s:?}"))?;
     if !(n.is_finite() && n > 0.0) {
         return Err(format!("size must be positive: {s:?}"));
     }

@@ -34,7 +34,10 @@ pub struct Bars {
 
 impl Bars {
     pub fn new(quiet: bool) -> Bars {
-        Bars { bar: Mutex::new(None), quiet }
+        Bars {
+            bar: Mutex::new(None),
+            quiet,
+        }
     }
 }
 
@@ -44,9 +47,15 @@ impl Progress for Bars {
         if let Some(old) = b.take() {
             old.finish_and_clear();
         }
-        let bar = if self.quiet { ProgressBar::hidden() } else { ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr()) };
+        let bar = if self.quiet {
+            ProgressBar::hidden()
+        } else {
+            ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr())
+        };
         let style = if total > 0 {
-            ProgressStyle::with_template("{msg:>22} [{bar:40}] {human_pos}/{human_len} ({per_sec}, {eta})")
+            ProgressStyle::with_template(
+                "{msg:>22} [{bar:40}] {human_pos}/{human_len} ({per_sec}, {eta})",
+            )
         } else {
             ProgressStyle::with_template("{msg:>22} {spinner} {human_pos}")
         };

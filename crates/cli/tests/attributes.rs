@@ -25,9 +25,15 @@ impl MeshVisitor for Collect {
 
 #[test]
 fn scan_normals_and_colours_survive_into_the_leaves() {
-    let input = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data/gargo-color.ply"));
+    let input = Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../../shared/data/gargo-color.ply"
+    ));
     if !input.exists() {
-        eprintln!("note: {} is absent (../shared/data); skipping", input.display());
+        eprintln!(
+            "note: {} is absent (../shared/data); skipping",
+            input.display()
+        );
         return;
     }
     let dir = tempfile::tempdir().unwrap();
@@ -43,7 +49,10 @@ fn scan_normals_and_colours_survive_into_the_leaves() {
         let p = m.decode_patch(i).unwrap();
         assert_eq!(p.colors.len(), p.positions.len(), "the model keeps colours");
         for k in 0..p.positions.len() {
-            stored.entry(p.positions[k]).or_default().push((p.normals[k], p.colors[k]));
+            stored
+                .entry(p.positions[k])
+                .or_default()
+                .push((p.normals[k], p.colors[k]));
         }
     }
     let mut c = Collect(Vec::new(), MeshHeader::default());
@@ -53,14 +62,25 @@ fn scan_normals_and_colours_survive_into_the_leaves() {
     let mut worst_deg = 0.0f64;
     let mut checked = 0;
     for v in &c.0 {
-        let q: [u32; 3] = std::array::from_fn(|a| ((v.position[a] as f64 - h.cube_origin[a]) / h.cube_size * cells).round().clamp(0.0, cells) as u32);
-        let Some(candidates) = stored.get(&q) else { continue }; // unreferenced input vertex
+        let q: [u32; 3] = std::array::from_fn(|a| {
+            ((v.position[a] as f64 - h.cube_origin[a]) / h.cube_size * cells)
+                .round()
+                .clamp(0.0, cells) as u32
+        });
+        let Some(candidates) = stored.get(&q) else {
+            continue;
+        }; // unreferenced input vertex
         let len = v.normal.iter().map(|x| x * x).sum::<f32>().sqrt();
         let n_in = v.normal.map(|x| x / len);
         let best = candidates
             .iter()
             .filter(|(_, col)| *col == v.color)
-            .map(|(n, _)| (n[0] * n_in[0] + n[1] * n_in[1] + n[2] * n_in[2]).clamp(-1.0, 1.0).acos().to_degrees() as f64)
+            .map(|(n, _)| {
+                (n[0] * n_in[0] + n[1] * n_in[1] + n[2] * n_in[2])
+                    .clamp(-1.0, 1.0)
+                    .acos()
+                    .to_degrees() as f64
+            })
             .fold(f64::INFINITY, f64::min);
         assert!(best.is_finite(), "input colour {:?} lost at {q:?}", v.color);
         worst_deg = worst_deg.max(best);

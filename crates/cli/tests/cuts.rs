@@ -8,7 +8,7 @@ mod common;
 
 use common::*;
 use std::collections::HashMap;
-use tessera_format::{Model, NO_NODE, NODE_FLAG_LEAF};
+use tessera_format::{Model, NODE_FLAG_LEAF, NO_NODE};
 use tessera_select::{select_cut, uniform_level_cut, Camera, Criterion};
 
 /// Checks that `nodes` is a proper cut: no selected node lies under another, and every
@@ -36,9 +36,15 @@ fn assert_is_cut(m: &Model, nodes: &[u32], label: &str) {
             assert!(steps < 300, "{label}: parent links loop");
         }
         if leaf {
-            assert_eq!(count, 1, "{label}: path from leaf {i} holds {count} selected nodes");
+            assert_eq!(
+                count, 1,
+                "{label}: path from leaf {i} holds {count} selected nodes"
+            );
         } else {
-            assert_eq!(count, 1, "{label}: selected node {i} lies under another selected node");
+            assert_eq!(
+                count, 1,
+                "{label}: selected node {i} lies under another selected node"
+            );
         }
     }
 }
@@ -59,7 +65,10 @@ struct CrackCheck<'a> {
 
 /// Both ends of the edge on one side of the terrain's square (grid coordinates).
 fn on_border(n: u32, a: [u32; 3], b: [u32; 3]) -> bool {
-    (a[0] == 0 && b[0] == 0) || (a[0] == n && b[0] == n) || (a[1] == 0 && b[1] == 0) || (a[1] == n && b[1] == n)
+    (a[0] == 0 && b[0] == 0)
+        || (a[0] == n && b[0] == n)
+        || (a[1] == 0 && b[1] == 0)
+        || (a[1] == n && b[1] == n)
 }
 
 /// (boundary edges, boundary edges not on the border) of a merged cut.
@@ -74,8 +83,15 @@ fn boundary_edges_off_border(mesh: &tessera_select::CutMesh, n: u32) -> (u64, u6
             *uses.entry(if a < b { (a, b) } else { (b, a) }).or_default() += 1;
         }
     }
-    let boundary: Vec<_> = uses.into_iter().filter(|(_, u)| *u == 1).map(|(e, _)| e).collect();
-    let off = boundary.iter().filter(|(a, b)| !on_border(n, *a, *b)).count() as u64;
+    let boundary: Vec<_> = uses
+        .into_iter()
+        .filter(|(_, u)| *u == 1)
+        .map(|(e, _)| e)
+        .collect();
+    let off = boundary
+        .iter()
+        .filter(|(a, b)| !on_border(n, *a, *b))
+        .count() as u64;
     (boundary.len() as u64, off)
 }
 
@@ -87,8 +103,15 @@ impl CrackCheck<'_> {
         assert!(!nodes.is_empty(), "{label}: empty cut");
         assert_is_cut(m, nodes, &label);
         let (mesh, r) = cut_report(&self.patches, nodes);
-        let expected: u64 = nodes.iter().map(|&n| u64::from(m.nodes()[n as usize].triangle_count)).sum();
-        assert_eq!(mesh.triangle_count() as u64, expected, "{label}: merged triangle count");
+        let expected: u64 = nodes
+            .iter()
+            .map(|&n| u64::from(m.nodes()[n as usize].triangle_count))
+            .sum();
+        assert_eq!(
+            mesh.triangle_count() as u64,
+            expected,
+            "{label}: merged triangle count"
+        );
         self.checked += 1;
         let levels = nodes.iter().map(|&n| m.nodes()[n as usize].level);
         let (lo, hi) = (levels.clone().min().unwrap_or(0), levels.max().unwrap_or(0));
@@ -101,11 +124,15 @@ impl CrackCheck<'_> {
             Some(n) => {
                 let (all, off) = boundary_edges_off_border(&mesh, n);
                 assert_eq!(all, r.boundary_edges);
-                (off == 0 && r.nonmanifold_edges == 0, format!(" ({off} of them off the terrain's border)"))
+                (
+                    off == 0 && r.nonmanifold_edges == 0,
+                    format!(" ({off} of them off the terrain's border)"),
+                )
             }
         };
         if !ok {
-            let allowed = |a: [u32; 3], b: [u32; 3]| self.open_border.is_some_and(|n| on_border(n, a, b));
+            let allowed =
+                |a: [u32; 3], b: [u32; 3]| self.open_border.is_some_and(|n| on_border(n, a, b));
             self.failures.push(format!(
                 "{label}: {} nodes (levels {lo}..={hi}), {} triangles: {} boundary edges{boundary_note}, {} non-manifold edges, {} degenerate triangles\n    {}",
                 nodes.len(),
@@ -131,8 +158,14 @@ fn degenerate_summary(m: &Model, patches: &[tessera_format::PatchData]) -> Strin
                 per_level[n.level as usize].0 += 1;
                 continue;
             }
-            let (u, v) = ([b[0] - a[0], b[1] - a[1], b[2] - a[2]], [c[0] - a[0], c[1] - a[1], c[2] - a[2]]);
-            if u[1] * v[2] == u[2] * v[1] && u[2] * v[0] == u[0] * v[2] && u[0] * v[1] == u[1] * v[0] {
+            let (u, v) = (
+                [b[0] - a[0], b[1] - a[1], b[2] - a[2]],
+                [c[0] - a[0], c[1] - a[1], c[2] - a[2]],
+            );
+            if u[1] * v[2] == u[2] * v[1]
+                && u[2] * v[0] == u[0] * v[2]
+                && u[0] * v[1] == u[1] * v[0]
+            {
                 per_level[n.level as usize].1 += 1;
             }
         }
@@ -143,26 +176,58 @@ fn degenerate_summary(m: &Model, patches: &[tessera_format::PatchData]) -> Strin
         .filter(|(_, (r, c))| r + c > 0)
         .map(|(l, (r, c))| format!("L{l}: {r} repeated-corner + {c} collinear"))
         .collect();
-    if s.is_empty() { "none".into() } else { s.join(", ") }
+    if s.is_empty() {
+        "none".into()
+    } else {
+        s.join(", ")
+    }
 }
 
 /// Builds a sphere and checks: the uniform cut at every level, `error_cuts` max-error
 /// cuts from 0 to the model's max error, and `cameras` view cuts without culling from
 /// random cameras around, near and inside the model.
-fn crack_free_sphere(triangles: u64, seed: u64, colors: bool, quant_bits: Option<u32>, error_cuts: usize, cameras: usize) {
-    let opts = tessera_build::BuildOptions { quant_bits, ..small_options() };
+fn crack_free_sphere(
+    triangles: u64,
+    seed: u64,
+    colors: bool,
+    quant_bits: Option<u32>,
+    error_cuts: usize,
+    cameras: usize,
+) {
+    let opts = tessera_build::BuildOptions {
+        quant_bits,
+        ..small_options()
+    };
     let built = build_sphere(triangles, seed, colors, &opts);
-    crack_free_model(&built, &format!("sphere {triangles} seed {seed} colors {colors}"), error_cuts, cameras, false, seed ^ triangles);
+    crack_free_model(
+        &built,
+        &format!("sphere {triangles} seed {seed} colors {colors}"),
+        error_cuts,
+        cameras,
+        false,
+        seed ^ triangles,
+    );
 }
 
 /// The checks of [`crack_free_sphere`] on a built model; with `open`, the model is a
 /// terrain over the unit square whose own border may be open.
-fn crack_free_model(built: &Built, name: &str, error_cuts: usize, cameras: usize, open: bool, seed: u64) {
+fn crack_free_model(
+    built: &Built,
+    name: &str,
+    error_cuts: usize,
+    cameras: usize,
+    open: bool,
+    seed: u64,
+) {
     let (code, out, err) = run_tessera(args!["verify", built.model_path]);
     assert_eq!(code, 0, "verify failed on a fresh build: {out}{err}");
     let m = &built.model;
     let h = *m.header();
-    assert!(h.level_count >= 3, "want a deep hierarchy, got {} levels", h.level_count);
+    assert!(
+        h.level_count >= 3,
+        "want a deep hierarchy, got {} levels",
+        h.level_count
+    );
     let open_border = open.then(|| 1u32 << h.quant_bits);
     let mut c = CrackCheck {
         built,
@@ -175,7 +240,9 @@ fn crack_free_model(built: &Built, name: &str, error_cuts: usize, cameras: usize
     };
 
     // The input itself must be closed (the generator's contract): all leaves.
-    let leaves: Vec<u32> = (0..m.nodes().len() as u32).filter(|&i| m.nodes()[i as usize].flags & NODE_FLAG_LEAF != 0).collect();
+    let leaves: Vec<u32> = (0..m.nodes().len() as u32)
+        .filter(|&i| m.nodes()[i as usize].flags & NODE_FLAG_LEAF != 0)
+        .collect();
     c.check(&leaves, "all leaves".into());
 
     for level in 0..h.level_count {
@@ -231,10 +298,21 @@ fn crack_free_model(built: &Built, name: &str, error_cuts: usize, cameras: usize
             }
         };
         let tolerance = (0.5f64 * 100f64.powf(rng.unit())) as f32; // 0.5 .. 50 px, log-uniform
-        let cut = select_cut(&h, m.nodes(), &Criterion::View { camera: camera.clone(), tolerance_px: tolerance, cull: false });
+        let cut = select_cut(
+            &h,
+            m.nodes(),
+            &Criterion::View {
+                camera: camera.clone(),
+                tolerance_px: tolerance,
+                cull: false,
+            },
+        );
         let (lo, hi) = c.check(
             &cut.nodes,
-            format!("view #{k} eye {eye:.3?} target {target:.3?} fov {:.1} h {} tol {tolerance:.2}px", camera.fov_y_deg, camera.height),
+            format!(
+                "view #{k} eye {eye:.3?} target {target:.3?} fov {:.1} h {} tol {tolerance:.2}px",
+                camera.fov_y_deg, camera.height
+            ),
         );
         spread_hist[(hi - lo) as usize] += 1;
     }
@@ -258,11 +336,18 @@ fn crack_free_model(built: &Built, name: &str, error_cuts: usize, cameras: usize
             "{} of {} cuts are not closed manifolds ({name}):\n{}",
             c.failures.len(),
             c.checked,
-            shown.iter().map(|s| s.as_str()).collect::<Vec<_>>().join("\n")
+            shown
+                .iter()
+                .map(|s| s.as_str())
+                .collect::<Vec<_>>()
+                .join("\n")
         );
     }
     if cameras > 0 && h.level_count >= 6 {
-        assert!(nonuniform * 6 >= cameras, "too few strongly non-uniform view cuts: {spread_hist:?}");
+        assert!(
+            nonuniform * 6 >= cameras,
+            "too few strongly non-uniform view cuts: {spread_hist:?}"
+        );
     }
 }
 
@@ -296,42 +381,96 @@ fn finest_cut_reproduces_the_input() {
     let input = read_input(&built.input);
     let patches = decode_all(m);
     let cut = select_cut(&h, m.nodes(), &Criterion::MaxError { max_error: 0.0 });
-    assert!(cut.nodes.iter().all(|&n| m.nodes()[n as usize].flags & NODE_FLAG_LEAF != 0), "max_error 0 selects leaves only");
+    assert!(
+        cut.nodes
+            .iter()
+            .all(|&n| m.nodes()[n as usize].flags & NODE_FLAG_LEAF != 0),
+        "max_error 0 selects leaves only"
+    );
     let mesh = merge(&patches, &cut.nodes);
 
     let r = &built.report;
-    assert_eq!(r.degenerate_triangles_removed + r.duplicate_triangles_removed, 0, "the sphere has no bad triangles");
-    assert_eq!(mesh.triangle_count(), input.triangles.len(), "triangle count of the finest cut");
+    assert_eq!(
+        r.degenerate_triangles_removed + r.duplicate_triangles_removed,
+        0,
+        "the sphere has no bad triangles"
+    );
+    assert_eq!(
+        mesh.triangle_count(),
+        input.triangles.len(),
+        "triangle count of the finest cut"
+    );
     assert_eq!(h.input_triangles as usize, input.triangles.len());
-    assert_eq!(mesh.positions.len(), input.positions.len(), "welded vertex count of the finest cut");
+    assert_eq!(
+        mesh.positions.len(),
+        input.positions.len(),
+        "welded vertex count of the finest cut"
+    );
 
     let qin: Vec<[u32; 3]> = input.positions.iter().map(|&p| quantize(&h, p)).collect();
     let want = triangle_set(&qin, input.triangles.iter().copied());
-    let got = triangle_set(&mesh.positions, mesh.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]));
-    let missing = want.iter().filter(|t| got.binary_search(t).is_err()).count();
-    let extra = got.iter().filter(|t| want.binary_search(t).is_err()).count();
-    assert_eq!((missing, extra), (0, 0), "input triangles missing from / extra in the finest cut");
+    let got = triangle_set(
+        &mesh.positions,
+        mesh.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]),
+    );
+    let missing = want
+        .iter()
+        .filter(|t| got.binary_search(t).is_err())
+        .count();
+    let extra = got
+        .iter()
+        .filter(|t| want.binary_search(t).is_err())
+        .count();
+    assert_eq!(
+        (missing, extra),
+        (0, 0),
+        "input triangles missing from / extra in the finest cut"
+    );
     assert_eq!(want, got);
 
     // Colours follow their vertices.
-    let colour_at: HashMap<[u32; 3], [u8; 4]> = mesh.positions.iter().copied().zip(mesh.colors.iter().copied()).collect();
+    let colour_at: HashMap<[u32; 3], [u8; 4]> = mesh
+        .positions
+        .iter()
+        .copied()
+        .zip(mesh.colors.iter().copied())
+        .collect();
     assert_eq!(mesh.colors.len(), mesh.positions.len(), "colours kept");
     for (q, c) in qin.iter().zip(&input.colors) {
         assert_eq!(colour_at.get(q), Some(c), "colour at grid point {q:?}");
     }
-    eprintln!("finest cut: {} triangles, {} vertices, identical to the quantized input", mesh.triangle_count(), mesh.positions.len());
+    eprintln!(
+        "finest cut: {} triangles, {} vertices, identical to the quantized input",
+        mesh.triangle_count(),
+        mesh.positions.len()
+    );
 }
 
 /// Largest distance from a sample of input vertices to the surface of a cut, model units.
-fn max_distance_to_cut(m: &Model, input: &InputMesh, mesh: &tessera_select::CutMesh, samples: usize) -> f64 {
-    let pos: Vec<[f64; 3]> = mesh.positions.iter().map(|&q| m.model_position(q)).collect();
-    let tris: Vec<[[f64; 3]; 3]> =
-        mesh.indices.chunks_exact(3).map(|t| [pos[t[0] as usize], pos[t[1] as usize], pos[t[2] as usize]]).collect();
+fn max_distance_to_cut(
+    m: &Model,
+    input: &InputMesh,
+    mesh: &tessera_select::CutMesh,
+    samples: usize,
+) -> f64 {
+    let pos: Vec<[f64; 3]> = mesh
+        .positions
+        .iter()
+        .map(|&q| m.model_position(q))
+        .collect();
+    let tris: Vec<[[f64; 3]; 3]> = mesh
+        .indices
+        .chunks_exact(3)
+        .map(|t| [pos[t[0] as usize], pos[t[1] as usize], pos[t[2] as usize]])
+        .collect();
     let stride = (input.positions.len() / samples).max(1);
     let mut worst = 0.0f64;
     for p in input.positions.iter().step_by(stride) {
         let p = p.map(f64::from);
-        let d2 = tris.iter().map(|t| point_triangle_dist2(p, t[0], t[1], t[2])).fold(f64::INFINITY, f64::min);
+        let d2 = tris
+            .iter()
+            .map(|t| point_triangle_dist2(p, t[0], t[1], t[2]))
+            .fold(f64::INFINITY, f64::min);
         worst = worst.max(d2.sqrt());
     }
     worst
@@ -350,7 +489,10 @@ fn coarse_cuts_are_within_their_recorded_error() {
     let mut report = Vec::new();
     for level in [0u8, 2] {
         let nodes = uniform_level_cut(m.nodes(), level);
-        let err = nodes.iter().map(|&n| m.nodes()[n as usize].error).fold(0.0f32, f32::max) as f64;
+        let err = nodes
+            .iter()
+            .map(|&n| m.nodes()[n as usize].error)
+            .fold(0.0f32, f32::max) as f64;
         if level == 0 {
             assert_eq!(err as f32, h.max_error, "roots carry the model's max error");
         }
@@ -366,32 +508,51 @@ fn coarse_cuts_are_within_their_recorded_error() {
             "level {level}: an input vertex is {d:.4e} from the cut, more than its error {err:.4e} + step {step:.2e} (ratio {ratio:.3})"
         );
     }
-    eprintln!("coarse cuts vs input (quant step {step:.2e}):\n  {}", report.join("\n  "));
+    eprintln!(
+        "coarse cuts vs input (quant step {step:.2e}):\n  {}",
+        report.join("\n  ")
+    );
 }
 
 /// A real scan: builds with default options, verifies, and its finest cut holds every
 /// input triangle but the degenerate / duplicate ones the builder reports removing.
 #[test]
 fn bunny_builds_verifies_and_keeps_every_triangle() {
-    let path = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data/bunny.obj"));
+    let path = std::path::Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../../shared/data/bunny.obj"
+    ));
     if !path.exists() {
-        eprintln!("note: {} is absent; skipping the real-scan test", path.display());
+        eprintln!(
+            "note: {} is absent; skipping the real-scan test",
+            path.display()
+        );
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let opts = tessera_build::BuildOptions { threads: Some(2), ..Default::default() };
+    let opts = tessera_build::BuildOptions {
+        threads: Some(2),
+        ..Default::default()
+    };
     let built = build_file(dir, path.to_path_buf(), &opts);
     let (code, out, err) = run_tessera(args!["verify", built.model_path]);
     assert_eq!(code, 0, "verify failed on the bunny: {out}{err}");
     let m = &built.model;
     let h = *m.header();
     let r = &built.report;
-    assert_eq!(r.input_triangles, 69_451, "the Stanford bunny has 69,451 triangles");
+    assert_eq!(
+        r.input_triangles, 69_451,
+        "the Stanford bunny has 69,451 triangles"
+    );
     let removed = r.degenerate_triangles_removed + r.duplicate_triangles_removed;
     let patches = decode_all(m);
     let cut = select_cut(&h, m.nodes(), &Criterion::MaxError { max_error: 0.0 });
     let mesh = merge(&patches, &cut.nodes);
-    assert_eq!(mesh.triangle_count() as u64, 69_451 - removed, "finest cut: all input triangles but the {removed} removed");
+    assert_eq!(
+        mesh.triangle_count() as u64,
+        69_451 - removed,
+        "finest cut: all input triangles but the {removed} removed"
+    );
 
     // Every triangle of the cut is an input triangle (quantized), and it holds every
     // input triangle that quantization does not make degenerate, each once.
@@ -400,10 +561,22 @@ fn bunny_builds_verifies_and_keeps_every_triangle() {
     let mut want = triangle_set(&qin, input.triangles.iter().copied());
     want.retain(|t| t[0] != t[1] && t[1] != t[2] && t[2] != t[0]);
     want.dedup();
-    let got = triangle_set(&mesh.positions, mesh.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]));
-    let extra = got.iter().filter(|t| want.binary_search(t).is_err()).count();
-    assert_eq!(extra, 0, "triangles in the finest cut that are not input triangles");
-    let missing = want.iter().filter(|t| got.binary_search(t).is_err()).count();
+    let got = triangle_set(
+        &mesh.positions,
+        mesh.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]),
+    );
+    let extra = got
+        .iter()
+        .filter(|t| want.binary_search(t).is_err())
+        .count();
+    assert_eq!(
+        extra, 0,
+        "triangles in the finest cut that are not input triangles"
+    );
+    let missing = want
+        .iter()
+        .filter(|t| got.binary_search(t).is_err())
+        .count();
     eprintln!(
         "bunny: {} nodes, {} levels; {removed} removed ({} degenerate, {} duplicate); finest cut {} triangles; {} input triangles (deduplicated, non-degenerate after quantization) missing",
         m.nodes().len(),
@@ -418,7 +591,11 @@ fn bunny_builds_verifies_and_keeps_every_triangle() {
     // in orientation are distinct oriented triangles).
     let mut dedup = got.clone();
     dedup.dedup();
-    assert_eq!(dedup.len(), got.len(), "a triangle appears twice in the finest cut");
+    assert_eq!(
+        dedup.len(),
+        got.len(),
+        "a triangle appears twice in the finest cut"
+    );
 }
 
 /// A coarse grid (7 bits: a cell is about 40% of an edge) stresses simplification on the
@@ -438,7 +615,15 @@ fn crack_free_cuts_sphere_20k_coarse_quantization() {
 fn crack_free_cuts_terrain_40k() {
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("terrain.ply");
-    tessera_gen::write_terrain(&input, &tessera_gen::TerrainOptions { triangles: 40_000, seed: 8, colors: true }).unwrap();
+    tessera_gen::write_terrain(
+        &input,
+        &tessera_gen::TerrainOptions {
+            triangles: 40_000,
+            seed: 8,
+            colors: true,
+        },
+    )
+    .unwrap();
     let built = build_file(dir, input, &small_options());
     crack_free_model(&built, "terrain 40k seed 8", 10, 60, true, 8);
 }
@@ -456,7 +641,12 @@ fn crack_detector_sees_non_conforming_cuts() {
     assert!(r.is_closed_manifold());
     let (mut tried, mut cracked) = (0, 0);
     for (k, &n) in base.iter().enumerate().take(12) {
-        let children: Vec<u32> = m.nodes()[n as usize].children.iter().copied().filter(|&c| c != NO_NODE).collect();
+        let children: Vec<u32> = m.nodes()[n as usize]
+            .children
+            .iter()
+            .copied()
+            .filter(|&c| c != NO_NODE)
+            .collect();
         if children.is_empty() {
             continue;
         }
@@ -471,7 +661,10 @@ fn crack_detector_sees_non_conforming_cuts() {
     let (_, r) = cut_report(&patches, &dropped);
     assert!(r.boundary_edges > 0, "a missing patch leaves a hole");
     eprintln!("non-conforming cuts: {cracked} of {tried} show boundary edges");
-    assert!(tried > 0 && cracked * 2 >= tried, "the detector missed non-conforming cuts: {cracked} of {tried}");
+    assert!(
+        tried > 0 && cracked * 2 >= tried,
+        "the detector missed non-conforming cuts: {cracked} of {tried}"
+    );
 }
 
 /// Regression case found by the sweep below, at the builder's default (automatic) grid:
@@ -500,17 +693,31 @@ fn crack_free_cuts_sweep() {
             failed.push(name);
         }
     };
-    for (k, triangles) in [8_000u64, 15_000, 25_000, 40_000, 80_000, 120_000, 200_000].into_iter().enumerate() {
+    for (k, triangles) in [8_000u64, 15_000, 25_000, 40_000, 80_000, 120_000, 200_000]
+        .into_iter()
+        .enumerate()
+    {
         for bits in [None, Some(12), Some(18)] {
             let seed = 100 + k as u64;
-            run(format!("sphere {triangles} seed {seed} bits {bits:?}"), &|| crack_free_sphere(triangles, seed, k % 2 == 0, bits, 15, 80));
+            run(
+                format!("sphere {triangles} seed {seed} bits {bits:?}"),
+                &|| crack_free_sphere(triangles, seed, k % 2 == 0, bits, 15, 80),
+            );
         }
     }
     for seed in 20..24 {
         run(format!("terrain seed {seed}"), &|| {
             let dir = tempfile::tempdir().unwrap();
             let input = dir.path().join("terrain.ply");
-            tessera_gen::write_terrain(&input, &tessera_gen::TerrainOptions { triangles: 30_000 + 20_000 * seed, seed, colors: false }).unwrap();
+            tessera_gen::write_terrain(
+                &input,
+                &tessera_gen::TerrainOptions {
+                    triangles: 30_000 + 20_000 * seed,
+                    seed,
+                    colors: false,
+                },
+            )
+            .unwrap();
             let built = build_file(dir, input, &small_options());
             crack_free_model(&built, &format!("terrain seed {seed}"), 15, 80, true, seed);
         });

@@ -87,7 +87,10 @@ pub(crate) fn log_skips(path: &Path, report: &ImportReport) {
         );
     }
     if report.polygons_triangulated > 0 {
-        tracing::debug!("{p}: fan-triangulated {} polygons", report.polygons_triangulated);
+        tracing::debug!(
+            "{p}: fan-triangulated {} polygons",
+            report.polygons_triangulated
+        );
     }
 }
 
@@ -95,7 +98,9 @@ pub(crate) fn log_skips(path: &Path, report: &ImportReport) {
 pub(crate) fn finish_report(path: &Path, report: ImportReport) -> Result<ImportReport, MeshError> {
     log_skips(path, &report);
     if report.triangles == 0 {
-        return Err(MeshError::Empty { path: path.to_path_buf() });
+        return Err(MeshError::Empty {
+            path: path.to_path_buf(),
+        });
     }
     Ok(report)
 }

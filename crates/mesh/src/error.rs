@@ -24,13 +24,22 @@ pub enum MeshError {
     Truncated { path: PathBuf, detail: String },
     /// The content violates the format. `line_or_offset` is e.g. `line 12` or `byte 4096`.
     #[error("{}: {line_or_offset}: {detail}", path.display())]
-    Malformed { path: PathBuf, line_or_offset: String, detail: String },
+    Malformed {
+        path: PathBuf,
+        line_or_offset: String,
+        detail: String,
+    },
     /// A face references a vertex that does not exist.
     #[error(
         "{}: {line_or_offset}: vertex index {index} out of range (the mesh has {vertex_count} vertices)",
         path.display()
     )]
-    IndexOutOfRange { path: PathBuf, line_or_offset: String, index: i64, vertex_count: u64 },
+    IndexOutOfRange {
+        path: PathBuf,
+        line_or_offset: String,
+        index: i64,
+        vertex_count: u64,
+    },
     /// A vertex position is NaN or infinite.
     #[error("{}: vertex {vertex} has a non-finite coordinate (NaN or infinity)", path.display())]
     NonFinite { path: PathBuf, vertex: u64 },
@@ -51,7 +60,10 @@ pub enum MeshError {
 impl MeshError {
     /// Shorthand for [`MeshError::Io`].
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> MeshError {
-        MeshError::Io { path: path.into(), source }
+        MeshError::Io {
+            path: path.into(),
+            source,
+        }
     }
 
     /// Shorthand for [`MeshError::Malformed`].
@@ -69,7 +81,10 @@ impl MeshError {
 
     /// Shorthand for [`MeshError::Truncated`].
     pub fn truncated(path: impl Into<PathBuf>, detail: impl Into<String>) -> MeshError {
-        MeshError::Truncated { path: path.into(), detail: detail.into() }
+        MeshError::Truncated {
+            path: path.into(),
+            detail: detail.into(),
+        }
     }
 }
 
@@ -81,7 +96,9 @@ mod tests {
     fn display_is_one_line_starting_with_path() {
         let errors = [
             MeshError::io("/a/b.ply", std::io::Error::other("boom")),
-            MeshError::UnknownFormat { path: "/a/b.xyz".into() },
+            MeshError::UnknownFormat {
+                path: "/a/b.xyz".into(),
+            },
             MeshError::truncated("/a/b.ply", "expected 3 vertices, got 2"),
             MeshError::malformed("/a/b.obj", "line 3", "bad number"),
             MeshError::IndexOutOfRange {
@@ -90,9 +107,16 @@ mod tests {
                 index: 7,
                 vertex_count: 3,
             },
-            MeshError::NonFinite { path: "/a/b.ply".into(), vertex: 2 },
-            MeshError::Empty { path: "/a/b.ply".into() },
-            MeshError::TooManyVertices { path: "/a/b.ply".into() },
+            MeshError::NonFinite {
+                path: "/a/b.ply".into(),
+                vertex: 2,
+            },
+            MeshError::Empty {
+                path: "/a/b.ply".into(),
+            },
+            MeshError::TooManyVertices {
+                path: "/a/b.ply".into(),
+            },
         ];
         for e in errors {
             let s = e.to_string();

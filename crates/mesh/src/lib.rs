@@ -54,6 +54,8 @@ pub fn read_mesh(path: &Path, visitor: &mut dyn MeshVisitor) -> Result<ImportRep
         Some(InputFormat::Ply) => ply_read::read_ply(path, visitor),
         Some(InputFormat::Obj) => obj::read_obj(path, visitor),
         Some(InputFormat::Stl) => stl::read_stl(path, visitor),
-        None => Err(MeshError::UnknownFormat { path: path.to_path_buf() }),
+        None => Err(MeshError::UnknownFormat {
+            path: path.to_path_buf(),
+        }),
     }
 }

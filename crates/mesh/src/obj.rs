@@ -37,8 +37,16 @@ pub(crate) fn read_obj(
     visitor: &mut dyn MeshVisitor,
 ) -> Result<ImportReport, MeshError> {
     let scan = prescan(path, open(path)?)?;
-    let attributes = Attributes { normals: scan.uses_vn, colors: scan.colors, uvs: scan.uses_vt };
-    visitor.header(&MeshHeader { attributes, vertex_count: None, face_count: None })?;
+    let attributes = Attributes {
+        normals: scan.uses_vn,
+        colors: scan.colors,
+        uvs: scan.uses_vt,
+    };
+    visitor.header(&MeshHeader {
+        attributes,
+        vertex_count: None,
+        face_count: None,
+    })?;
     let mut reader = ObjReader::new(path, attributes, scan.uses_vt || scan.uses_vn);
     let mut src = Source::new(open(path)?);
     let mut line = Vec::new();
@@ -74,7 +82,9 @@ fn prescan<R: Read>(path: &Path, reader: R) -> Result<Scan, MeshError> {
     let mut scan = Scan::default();
     let mut seen_v = false;
     loop {
-        let more = src.line_into(&mut line, MAX_LINE).map_err(|e| read_error(path, &src, e))?;
+        let more = src
+            .line_into(&mut line, MAX_LINE)
+            .map_err(|e| read_error(path, &src, e))?;
         if !more {
             return Ok(scan);
         }
@@ -117,7 +127,8 @@ fn strip_comment(line: &[u8]) -> &[u8] {
 }
 
 fn words(line: &[u8]) -> impl Iterator<Item = &[u8]> {
-    line.split(|b| b.is_ascii_whitespace()).filter(|w| !w.is_empty())
+    line.split(|b| b.is_ascii_whitespace())
+        .filter(|w| !w.is_empty())
 }
 
 // ---------------------------------------------------------------------------------------
@@ -179,8 +190,9 @@ impl<'p> ObjReader<'p> {
         let mut any = false;
         line.clear();
         loop {
-            let more =
-                src.line_into(&mut part, MAX_LINE).map_err(|e| read_error(self.path, src, e))?;
+            let more = src
+                .line_into(&mut part, MAX_LINE)
+                .map_err(|e| read_error(self.path, src, e))?;
             if !more {
                 return Ok(any);
             }
@@ -278,7 +290,11 @@ impl<'p> ObjReader<'p> {
                 Ok(())
             }
             None => {
-                let v = Vertex { position, color, ..Vertex::default() };
+                let v = Vertex {
+                    position,
+                    color,
+                    ..Vertex::default()
+                };
                 self.deliver(&v, visitor).map(drop)
             }
         }
@@ -304,8 +320,9 @@ impl<'p> ObjReader<'p> {
 
     /// Hand a vertex to the visitor; returns its output index.
     fn deliver(&mut self, v: &Vertex, visitor: &mut dyn MeshVisitor) -> Result<u32, MeshError> {
-        let index = u32::try_from(self.delivered)
-            .map_err(|_| MeshError::TooManyVertices { path: self.path.to_path_buf() })?;
+        let index = u32::try_from(self.delivered).map_err(|_| MeshError::TooManyVertices {
+            path: self.path.to_path_buf(),
+        })?;
         visitor.vertex(v)?;
         self.delivered += 1;
         self.report.vertices += 1;
@@ -345,8 +362,12 @@ impl<'p> ObjReader<'p> {
     /// Resolve `v[/vt][/vn]` into 0-based indices (`NONE` when absent).
     fn parse_corner(&self, corner: &[u8]) -> Result<(u32, u32, u32), MeshError> {
         let mut parts = corner.split(|&b| b == b'/');
-        let bad =
-            || self.malformed(format!("bad face corner '{}'", String::from_utf8_lossy(corner)));
+        let bad = || {
+            self.malformed(format!(
+                "bad face corner '{}'",
+                String::from_utf8_lossy(corner)
+            ))
+        };
         let v = parts.next().filter(|p| !p.is_empty()).ok_or_else(bad)?;
         let vt = parts.next().filter(|p| !p.is_empty());
         let vn = parts.next().filter(|p| !p.is_empty());
@@ -354,16 +375,25 @@ impl<'p> ObjReader<'p> {
             return Err(bad());
         }
         let v = self.resolve(v, self.v_count, "vertex")?;
-        let vt = vt.map(|p| self.resolve(p, self.vt_count, "texture coordinate")).transpose()?;
-        let vn = vn.map(|p| self.resolve(p, self.vn_count, "normal")).transpose()?;
+        let vt = vt
+            .map(|p| self.resolve(p, self.vt_count, "texture coordinate"))
+            .transpose()?;
+        let vn = vn
+            .map(|p| self.resolve(p, self.vn_count, "normal"))
+            .transpose()?;
         Ok((v, vt.unwrap_or(NONE), vn.unwrap_or(NONE)))
     }
 
     /// 1-based or negative (relative) OBJ index → 0-based, checked against `count`.
     fn resolve(&self, word: &[u8], count: u64, what: &str) -> Result<u32, MeshError> {
-        let raw: i64 =
-            std::str::from_utf8(word).ok().and_then(|s| s.parse().ok()).ok_or_else(|| {
-                self.malformed(format!("bad {what} index '{}'", String::from_utf8_lossy(word)))
+        let raw: i64 = std::str::from_utf8(word)
+            .ok()
+            .and_then(|s| s.parse().ok())
+            .ok_or_else(|| {
+                self.malformed(format!(
+                    "bad {what} index '{}'",
+                    String::from_utf8_lossy(word)
+                ))
             })?;
         let resolved = match raw {
             1.. => Some(raw - 1),
@@ -378,10 +408,9 @@ impl<'p> ObjReader<'p> {
                 index: raw,
                 vertex_count: count,
             }),
-            _ => {
-                Err(self
-                    .malformed(format!("{what} index {raw} out of range ({count} defined so far)")))
-            }
+            _ => Err(self.malformed(format!(
+                "{what} index {raw} out of range ({count} defined so far)"
+            ))),
         }
     }
 
@@ -403,7 +432,11 @@ impl<'p> ObjReader<'p> {
         let get = |table: &[[f32; 3]], i: u32| table.get(i as usize).copied().unwrap_or_default();
         let vertex = Vertex {
             position: get(&c.positions, v),
-            normal: if vn == NONE { [0.0; 3] } else { get(&c.normals, vn) },
+            normal: if vn == NONE {
+                [0.0; 3]
+            } else {
+                get(&c.normals, vn)
+            },
             color: c.colors.get(v as usize).copied().unwrap_or([255; 4]),
             uv: c.uvs.get(vt as usize).copied().unwrap_or_default(),
         };

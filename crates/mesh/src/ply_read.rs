@@ -129,7 +129,11 @@ pub(crate) fn read_ply_from<R: Read>(
     reader: R,
     visitor: &mut dyn MeshVisitor,
 ) -> Result<ImportReport, MeshError> {
-    let mut cx = Ctx { path, src: Source::new(reader), ascii: false };
+    let mut cx = Ctx {
+        path,
+        src: Source::new(reader),
+        ascii: false,
+    };
     let header = parse_header(&mut cx)?;
     cx.ascii = header.format == Format::Ascii;
     let (vertex_el, face_el) = find_mesh_elements(&cx, &header)?;
@@ -141,7 +145,12 @@ pub(crate) fn read_ply_from<R: Read>(
         face_count: Some(header.elements[face_el].count),
     })?;
     let mut report = ImportReport::default();
-    let plans = Plans { vertex_el, face_el, vplan, fplan };
+    let plans = Plans {
+        vertex_el,
+        face_el,
+        vplan,
+        fplan,
+    };
     match header.format {
         Format::Ascii => read_body::<Ascii, R>(&mut cx, &header, &plans, visitor, &mut report)?,
         Format::BinaryLe => read_body::<Le, R>(&mut cx, &header, &plans, visitor, &mut report)?,
@@ -188,7 +197,9 @@ impl<R: Read> Ctx<'_, R> {
 fn parse_header<R: Read>(cx: &mut Ctx<'_, R>) -> Result<Header, MeshError> {
     let mut line = Vec::new();
     let next_line = |cx: &mut Ctx<'_, R>, line: &mut Vec<u8>| -> Result<bool, MeshError> {
-        cx.src.line_into(line, MAX_HEADER_LINE).map_err(|e| cx.err(e, || "a header line".into()))
+        cx.src
+            .line_into(line, MAX_HEADER_LINE)
+            .map_err(|e| cx.err(e, || "a header line".into()))
     };
     let magic_ok = next_line(cx, &mut line)? && line.trim_ascii() == b"ply";
     if !magic_ok {
@@ -202,7 +213,10 @@ fn parse_header<R: Read>(cx: &mut Ctx<'_, R>) -> Result<Header, MeshError> {
     let mut elements: Vec<Element> = Vec::new();
     loop {
         if !next_line(cx, &mut line)? {
-            return Err(MeshError::truncated(cx.path, "header ends before 'end_header'"));
+            return Err(MeshError::truncated(
+                cx.path,
+                "header ends before 'end_header'",
+            ));
         }
         // The line counter already moved past this line.
         let at = format!("line {}", cx.src.line.saturating_sub(1));
@@ -226,12 +240,17 @@ fn parse_header<R: Read>(cx: &mut Ctx<'_, R>) -> Result<Header, MeshError> {
                 let count = count
                     .parse::<u64>()
                     .map_err(|_| bad(format!("bad element count '{count}'")))?;
-                elements.push(Element { name: name.to_string(), count, props: Vec::new() });
+                elements.push(Element {
+                    name: name.to_string(),
+                    count,
+                    props: Vec::new(),
+                });
             }
             ["property", rest @ ..] => {
                 let prop = parse_property(rest).map_err(bad)?;
-                let el =
-                    elements.last_mut().ok_or_else(|| bad("property before any element".into()))?;
+                let el = elements
+                    .last_mut()
+                    .ok_or_else(|| bad("property before any element".into()))?;
                 el.props.push(prop);
             }
             _ => return Err(bad(format!("unexpected header line '{text}'"))),
@@ -251,9 +270,18 @@ fn parse_property(words: &[&str]) -> Result<Property, String> {
             if count.is_float() {
                 return Err(format!("list '{name}' has a non-integer count type"));
             }
-            Ok(Property { name: name.to_string(), kind: PropKind::List { count, item: ty(item)? } })
+            Ok(Property {
+                name: name.to_string(),
+                kind: PropKind::List {
+                    count,
+                    item: ty(item)?,
+                },
+            })
         }
-        [t, name] => Ok(Property { name: name.to_string(), kind: PropKind::Scalar(ty(t)?) }),
+        [t, name] => Ok(Property {
+            name: name.to_string(),
+            kind: PropKind::Scalar(ty(t)?),
+        }),
         _ => Err(format!("bad property line 'property {}'", words.join(" "))),
     }
 }
@@ -264,17 +292,29 @@ fn find_mesh_elements<R: Read>(
     header: &Header,
 ) -> Result<(usize, usize), MeshError> {
     let find = |name: &str| -> Result<Option<usize>, MeshError> {
-        let mut found = header.elements.iter().enumerate().filter(|(_, e)| e.name == name);
+        let mut found = header
+            .elements
+            .iter()
+            .enumerate()
+            .filter(|(_, e)| e.name == name);
         let first = found.next().map(|(i, _)| i);
         if found.next().is_some() {
-            return Err(MeshError::malformed(cx.path, "header", format!("two '{name}' elements")));
+            return Err(MeshError::malformed(
+                cx.path,
+                "header",
+                format!("two '{name}' elements"),
+            ));
         }
         Ok(first)
     };
     let vertex = find("vertex")?
         .ok_or_else(|| MeshError::malformed(cx.path, "header", "no 'vertex' element"))?;
     let face = find("face")?.ok_or_else(|| {
-        MeshError::malformed(cx.path, "header", "no 'face' element (point clouds are not meshes)")
+        MeshError::malformed(
+            cx.path,
+            "header",
+            "no 'face' element (point clouds are not meshes)",
+        )
     })?;
     if face < vertex && header.elements[face].count > 0 {
         return Err(MeshError::malformed(
@@ -284,7 +324,9 @@ fn find_mesh_elements<R: Read>(
         ));
     }
     if header.elements[vertex].count > u64::from(u32::MAX) {
-        return Err(MeshError::TooManyVertices { path: cx.path.to_path_buf() });
+        return Err(MeshError::TooManyVertices {
+            path: cx.path.to_path_buf(),
+        });
     }
     Ok((vertex, face))
 }
@@ -302,8 +344,9 @@ const U: usize = 10;
 const TRASH: usize = 12;
 const SLOTS: usize = 13;
 /// Slot values before a vertex is read: colour channels default to 255.
-const DEFAULTS: [f64; SLOTS] =
-    [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 255.0, 255.0, 255.0, 255.0, 0.0, 0.0, 0.0];
+const DEFAULTS: [f64; SLOTS] = [
+    0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 255.0, 255.0, 255.0, 255.0, 0.0, 0.0, 0.0,
+];
 
 fn slot_for(name: &str) -> Option<usize> {
     Some(match name {
@@ -356,7 +399,12 @@ impl VertexPlan {
                 PropKind::Scalar(s) if s.is_float() && (R..=A).contains(&slot) => 255.0,
                 _ => 1.0,
             };
-            props.push(VertexProp { kind: p.kind, slot, scale, offset });
+            props.push(VertexProp {
+                kind: p.kind,
+                slot,
+                scale,
+                offset,
+            });
             offset += match p.kind {
                 PropKind::Scalar(s) => s.size(),
                 PropKind::List { .. } => 0,
@@ -388,7 +436,11 @@ impl VertexPlan {
                 p.slot = TRASH;
             }
         }
-        Ok(VertexPlan { props, stride: el.fixed_stride(), attributes })
+        Ok(VertexPlan {
+            props,
+            stride: el.fixed_stride(),
+            attributes,
+        })
     }
 }
 
@@ -422,7 +474,10 @@ impl FacePlan {
                 ))
             }
         }
-        Ok(FacePlan { props: el.props.iter().map(|p| p.kind).collect(), indices: pos })
+        Ok(FacePlan {
+            props: el.props.iter().map(|p| p.kind).collect(),
+            indices: pos,
+        })
     }
 
     /// `Some(count type)` for the common binary layout: only an index list of 4-byte ints
@@ -505,9 +560,15 @@ impl Decoder for Ascii {
     const BINARY: bool = false;
     fn value<R: Read>(src: &mut Source<R>, _ty: Scalar) -> Result<f64, ReadErr> {
         let tok = src.token()?.ok_or(ReadErr::Eof)?;
-        std::str::from_utf8(tok).ok().and_then(|s| s.parse::<f64>().ok()).ok_or_else(|| {
-            ReadErr::Parse(format!("'{}' is not a number", String::from_utf8_lossy(tok)))
-        })
+        std::str::from_utf8(tok)
+            .ok()
+            .and_then(|s| s.parse::<f64>().ok())
+            .ok_or_else(|| {
+                ReadErr::Parse(format!(
+                    "'{}' is not a number",
+                    String::from_utf8_lossy(tok)
+                ))
+            })
     }
     fn at(_rec: &[u8], _off: usize, _ty: Scalar) -> f64 {
         0.0
@@ -601,7 +662,10 @@ fn read_vertices<D: Decoder, R: Read>(
         read.map_err(|e| cx.err(e, || format!("vertex {i} of {}", el.count)))?;
         let v = make_vertex(&vals);
         if !v.position.iter().all(|c| c.is_finite()) {
-            return Err(MeshError::NonFinite { path: cx.path.to_path_buf(), vertex: i });
+            return Err(MeshError::NonFinite {
+                path: cx.path.to_path_buf(),
+                vertex: i,
+            });
         }
         visitor.vertex(&v)?;
     }

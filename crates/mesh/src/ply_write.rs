@@ -52,7 +52,9 @@ impl PlyWriter {
     /// Create the temporary file beside `path` and write the header.
     pub fn create(path: &Path, opts: &PlyWriterOptions) -> Result<PlyWriter, MeshError> {
         if opts.vertex_count > u64::from(u32::MAX) {
-            return Err(MeshError::TooManyVertices { path: path.to_path_buf() });
+            return Err(MeshError::TooManyVertices {
+                path: path.to_path_buf(),
+            });
         }
         let tmp_path = temp_path_for(path)?;
         let file = File::options()
@@ -87,8 +89,10 @@ impl PlyWriter {
             return Err(self.usage("vertex written after a triangle; write all vertices first"));
         }
         if self.vertices_written >= self.vertex_count {
-            return Err(self
-                .usage(format!("more vertices written than the {} declared", self.vertex_count)));
+            return Err(self.usage(format!(
+                "more vertices written than the {} declared",
+                self.vertex_count
+            )));
         }
         if !v.position.iter().all(|c| c.is_finite()) {
             return Err(MeshError::NonFinite {
@@ -106,9 +110,10 @@ impl PlyWriter {
     /// Append one triangle of vertex indices (each below the declared vertex count).
     pub fn write_triangle(&mut self, idx: [u32; 3]) -> Result<(), MeshError> {
         if self.faces_written >= self.face_count {
-            return Err(
-                self.usage(format!("more triangles written than the {} declared", self.face_count))
-            );
+            return Err(self.usage(format!(
+                "more triangles written than the {} declared",
+                self.face_count
+            )));
         }
         if let Some(&bad) = idx.iter().find(|&&i| u64::from(i) >= self.vertex_count) {
             return Err(MeshError::IndexOutOfRange {
@@ -140,8 +145,11 @@ impl PlyWriter {
         let Some(out) = self.out.take() else {
             return Err(self.usage("writer already failed"));
         };
-        let file = out.into_inner().map_err(|e| MeshError::io(&self.tmp_path, e.into_error()))?;
-        file.sync_all().map_err(|e| MeshError::io(&self.tmp_path, e))?;
+        let file = out
+            .into_inner()
+            .map_err(|e| MeshError::io(&self.tmp_path, e.into_error()))?;
+        file.sync_all()
+            .map_err(|e| MeshError::io(&self.tmp_path, e))?;
         drop(file);
         std::fs::rename(&self.tmp_path, &self.path).map_err(|e| MeshError::io(&self.path, e))?;
         // The temporary name no longer exists: make Drop a no-op.
@@ -152,13 +160,18 @@ impl PlyWriter {
 
     fn write_bytes(&mut self, bytes: &[u8]) -> Result<(), MeshError> {
         match self.out.as_mut() {
-            Some(out) => out.write_all(bytes).map_err(|e| MeshError::io(&self.tmp_path, e)),
+            Some(out) => out
+                .write_all(bytes)
+                .map_err(|e| MeshError::io(&self.tmp_path, e)),
             None => Err(self.usage("writer already finished")),
         }
     }
 
     fn usage(&self, detail: impl Into<String>) -> MeshError {
-        MeshError::Usage { path: self.path.clone(), detail: detail.into() }
+        MeshError::Usage {
+            path: self.path.clone(),
+            detail: detail.into(),
+        }
     }
 }
 
@@ -206,8 +219,10 @@ fn sync_parent_dir(path: &Path) {
 fn header_text(opts: &PlyWriterOptions) -> String {
     let mut h = String::from("ply\nformat binary_little_endian 1.0\n");
     for c in &opts.comments {
-        let clean: String =
-            c.chars().map(|ch| if ch == '\n' || ch == '\r' { ' ' } else { ch }).collect();
+        let clean: String = c
+            .chars()
+            .map(|ch| if ch == '\n' || ch == '\r' { ' ' } else { ch })
+            .collect();
         h.push_str("comment ");
         h.push_str(&clean);
         h.push('\n');
@@ -262,11 +277,17 @@ mod tests {
     use super::*;
 
     fn opts(v: u64, f: u64) -> PlyWriterOptions {
-        PlyWriterOptions { vertex_count: v, face_count: f, ..Default::default() }
+        PlyWriterOptions {
+            vertex_count: v,
+            face_count: f,
+            ..Default::default()
+        }
     }
 
     fn dir_is_empty(dir: &Path) -> bool {
-        std::fs::read_dir(dir).map(|mut d| d.next().is_none()).unwrap_or(false)
+        std::fs::read_dir(dir)
+            .map(|mut d| d.next().is_none())
+            .unwrap_or(false)
     }
 
     #[test]
@@ -277,8 +298,11 @@ mod tests {
         o.comments.push("hello\nworld".into());
         let mut w = PlyWriter::create(&path, &o).unwrap();
         for i in 0..3 {
-            w.write_vertex(&Vertex { position: [i as f32, 0.0, 1.0], ..Default::default() })
-                .unwrap();
+            w.write_vertex(&Vertex {
+                position: [i as f32, 0.0, 1.0],
+                ..Default::default()
+            })
+            .unwrap();
         }
         w.write_triangle([0, 1, 2]).unwrap();
         w.finish().unwrap();
@@ -322,11 +346,20 @@ mod tests {
         for _ in 0..3 {
             w.write_vertex(&Vertex::default()).unwrap();
         }
-        assert!(w.write_vertex(&Vertex::default()).is_err(), "too many vertices");
+        assert!(
+            w.write_vertex(&Vertex::default()).is_err(),
+            "too many vertices"
+        );
         assert!(w.write_triangle([0, 1, 3]).is_err(), "index out of range");
         w.write_triangle([0, 1, 2]).unwrap();
-        assert!(w.write_vertex(&Vertex::default()).is_err(), "vertex after triangle");
-        let nan = Vertex { position: [f32::NAN, 0.0, 0.0], ..Default::default() };
+        assert!(
+            w.write_vertex(&Vertex::default()).is_err(),
+            "vertex after triangle"
+        );
+        let nan = Vertex {
+            position: [f32::NAN, 0.0, 0.0],
+            ..Default::default()
+        };
         assert!(matches!(w.write_vertex(&nan), Err(MeshError::Usage { .. })));
         w.write_triangle([2, 1, 0]).unwrap();
         assert!(w.write_triangle([0, 1, 2]).is_err(), "too many triangles");
@@ -339,8 +372,14 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("t.ply");
         let mut w = PlyWriter::create(&path, &opts(1, 0)).unwrap();
-        let nan = Vertex { position: [0.0, f32::INFINITY, 0.0], ..Default::default() };
-        assert!(matches!(w.write_vertex(&nan), Err(MeshError::NonFinite { vertex: 0, .. })));
+        let nan = Vertex {
+            position: [0.0, f32::INFINITY, 0.0],
+            ..Default::default()
+        };
+        assert!(matches!(
+            w.write_vertex(&nan),
+            Err(MeshError::NonFinite { vertex: 0, .. })
+        ));
     }
 
     #[test]

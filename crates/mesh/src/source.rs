@@ -44,7 +44,14 @@ pub(crate) struct Source<R> {
 
 impl<R: Read> Source<R> {
     pub(crate) fn new(inner: R) -> Self {
-        Source { inner, buf: vec![0; WINDOW], pos: 0, end: 0, base: 0, line: 1 }
+        Source {
+            inner,
+            buf: vec![0; WINDOW],
+            pos: 0,
+            end: 0,
+            base: 0,
+            line: 1,
+        }
     }
 
     /// Absolute offset of the next unread byte.

@@ -28,9 +28,13 @@ pub(crate) fn read_stl(
     let mut file = File::open(path).map_err(|e| MeshError::io(path, e))?;
     let size = file.metadata().map_err(|e| MeshError::io(path, e))?.len();
     let mut head = Vec::with_capacity(512);
-    (&mut file).take(512).read_to_end(&mut head).map_err(|e| MeshError::io(path, e))?;
-    let declared =
-        head.get(80..84).map(|b| u64::from(u32::from_le_bytes([b[0], b[1], b[2], b[3]])));
+    (&mut file)
+        .take(512)
+        .read_to_end(&mut head)
+        .map_err(|e| MeshError::io(path, e))?;
+    let declared = head
+        .get(80..84)
+        .map(|b| u64::from(u32::from_le_bytes([b[0], b[1], b[2], b[3]])));
     let is_binary_size = declared.is_some_and(|n| size == BINARY_HEADER + FACET_BYTES * n);
     let mut src = Source::new(File::open(path).map_err(|e| MeshError::io(path, e))?);
     let mut welder = Welder::new(path);
@@ -39,7 +43,10 @@ pub(crate) fn read_stl(
         read_ascii(&mut src, &mut welder, visitor)?;
     } else {
         let Some(n) = declared else {
-            return Err(MeshError::truncated(path, "binary STL header needs 84 bytes"));
+            return Err(MeshError::truncated(
+                path,
+                "binary STL header needs 84 bytes",
+            ));
         };
         let expected = BINARY_HEADER + FACET_BYTES * n;
         if size > expected {
@@ -49,7 +56,10 @@ pub(crate) fn read_stl(
                 size - expected
             );
         }
-        visitor.header(&MeshHeader { face_count: Some(n), ..MeshHeader::default() })?;
+        visitor.header(&MeshHeader {
+            face_count: Some(n),
+            ..MeshHeader::default()
+        })?;
         read_binary(&mut src, n, &mut welder, visitor)?;
     }
     finish_report(path, welder.report)
@@ -58,7 +68,9 @@ pub(crate) fn read_stl(
 /// `solid` followed by text (binary files sometimes start with `solid` too).
 fn looks_like_ascii(head: &[u8]) -> bool {
     head.trim_ascii_start().starts_with(b"solid")
-        && head.iter().all(|&b| b.is_ascii_graphic() || b.is_ascii_whitespace())
+        && head
+            .iter()
+            .all(|&b| b.is_ascii_graphic() || b.is_ascii_whitespace())
 }
 
 /// Welds corners with identical positions and turns facets into indexed triangles.
@@ -99,9 +111,13 @@ impl<'p> Welder<'p> {
         let index = match self.map.get(&key) {
             Some(&i) => i,
             None => {
-                let i = u32::try_from(self.map.len())
-                    .map_err(|_| MeshError::TooManyVertices { path: self.path.to_path_buf() })?;
-                visitor.vertex(&Vertex { position: p, ..Vertex::default() })?;
+                let i = u32::try_from(self.map.len()).map_err(|_| MeshError::TooManyVertices {
+                    path: self.path.to_path_buf(),
+                })?;
+                visitor.vertex(&Vertex {
+                    position: p,
+                    ..Vertex::default()
+                })?;
                 self.report.vertices += 1;
                 self.map.insert(key, i);
                 i
@@ -130,7 +146,8 @@ fn read_binary<R: Read>(
         ReadErr::Io(e) => MeshError::io(path, e),
         _ => MeshError::truncated(path, what),
     };
-    src.skip(BINARY_HEADER).map_err(|e| err(e, "the 84-byte binary STL header".into()))?;
+    src.skip(BINARY_HEADER)
+        .map_err(|e| err(e, "the 84-byte binary STL header".into()))?;
     for i in 0..n {
         let rec = src
             .take(FACET_BYTES as usize)
@@ -197,7 +214,10 @@ fn read_ascii<R: Read>(
         }
     }
     if in_facet {
-        return Err(MeshError::truncated(path, "file ends inside a facet (expected 'endfacet')"));
+        return Err(MeshError::truncated(
+            path,
+            "file ends inside a facet (expected 'endfacet')",
+        ));
     }
     Ok(())
 }

@@ -27,7 +27,12 @@ pub struct Vertex {
 
 impl Default for Vertex {
     fn default() -> Self {
-        Vertex { position: [0.0; 3], normal: [0.0; 3], color: [255; 4], uv: [0.0; 2] }
+        Vertex {
+            position: [0.0; 3],
+            normal: [0.0; 3],
+            color: [255; 4],
+            uv: [0.0; 2],
+        }
     }
 }
 

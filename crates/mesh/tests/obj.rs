@@ -60,7 +60,14 @@ f 3/3/2 2/2/2 1/1/2
 f 1/1/1 2/2/1 3/3/1
 ";
     let (r, c) = read_ok("vtn.obj", text.as_bytes());
-    assert_eq!(c.headers[0].attributes, Attributes { normals: true, colors: false, uvs: true });
+    assert_eq!(
+        c.headers[0].attributes,
+        Attributes {
+            normals: true,
+            colors: false,
+            uvs: true
+        }
+    );
     assert_eq!(r.vertices, 6, "two normals per position");
     assert_eq!(c.triangles, vec![[0, 1, 2], [3, 4, 5], [0, 1, 2]]);
     assert_eq!(c.vertices[1].uv, [1.0, 0.0]);
@@ -73,7 +80,14 @@ fn all_corner_syntaxes_and_relative_indices() {
     let text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nvt 0.25 0.75\nvn 1 0 0\n\
                 f 1//1 2//1 3//1\nf 2/1 4/1 3/1\nf -3/-1/-1 -2 -1\n";
     let (r, c) = read_ok("syn.obj", text.as_bytes());
-    assert_eq!(c.headers[0].attributes, Attributes { normals: true, colors: false, uvs: true });
+    assert_eq!(
+        c.headers[0].attributes,
+        Attributes {
+            normals: true,
+            colors: false,
+            uvs: true
+        }
+    );
     assert_eq!(r.triangles, 3);
     // v//vn corners get uv 0, v/vt corners normal 0.
     assert_eq!(c.vertices[0].uv, [0.0, 0.0]);
@@ -105,16 +119,38 @@ fn degenerate_short_crlf_continuation_and_comments() {
 #[test]
 fn index_errors_name_the_line() {
     let e = read_err("oor.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n");
-    assert!(matches!(e, MeshError::IndexOutOfRange { index: 4, vertex_count: 3, .. }), "{e}");
+    assert!(
+        matches!(
+            e,
+            MeshError::IndexOutOfRange {
+                index: 4,
+                vertex_count: 3,
+                ..
+            }
+        ),
+        "{e}"
+    );
     assert!(e.to_string().contains("line 4"), "{e}");
     let e = read_err("zero.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n");
-    assert!(matches!(e, MeshError::IndexOutOfRange { index: 0, .. }), "{e}");
+    assert!(
+        matches!(e, MeshError::IndexOutOfRange { index: 0, .. }),
+        "{e}"
+    );
     let e = read_err("neg.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf -4 1 2\n");
-    assert!(matches!(e, MeshError::IndexOutOfRange { index: -4, .. }), "{e}");
+    assert!(
+        matches!(e, MeshError::IndexOutOfRange { index: -4, .. }),
+        "{e}"
+    );
     // Faces may only reference vertices defined before them.
     let e = read_err("fwd.obj", b"v 0 0 0\nv 1 0 0\nf 1 2 3\nv 0 1 0\n");
-    assert!(matches!(e, MeshError::IndexOutOfRange { index: 3, .. }), "{e}");
-    let e = read_err("vt.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/1 2/2 3/1\n");
+    assert!(
+        matches!(e, MeshError::IndexOutOfRange { index: 3, .. }),
+        "{e}"
+    );
+    let e = read_err(
+        "vt.obj",
+        b"v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/1 2/2 3/1\n",
+    );
     assert!(e.to_string().contains("texture coordinate index 2"), "{e}");
     assert!(e.to_string().contains("line 5"), "{e}");
 }

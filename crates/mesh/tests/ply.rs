@@ -49,7 +49,9 @@ fn ascii_quad_is_fan_triangulated() {
 
 #[test]
 fn crlf_header_and_vertex_index_name() {
-    let text = ASCII_QUAD.replace('\n', "\r\n").replace("vertex_indices", "vertex_index");
+    let text = ASCII_QUAD
+        .replace('\n', "\r\n")
+        .replace("vertex_indices", "vertex_index");
     let (r, _) = read_ok("crlf.ply", text.as_bytes());
     assert_eq!(r.triangles, 3);
 }
@@ -80,7 +82,14 @@ end_header
 ";
     let (_, c) = read_ok("attr.ply", text.as_bytes());
     let a = c.headers[0].attributes;
-    assert_eq!(a, Attributes { normals: true, colors: true, uvs: true });
+    assert_eq!(
+        a,
+        Attributes {
+            normals: true,
+            colors: true,
+            uvs: true
+        }
+    );
     assert_eq!(c.vertices[0].color, [255, 128, 0, 255]);
     assert_eq!(c.vertices[2].color, [255, 0, 0, 255], "clamped");
     assert_eq!(c.vertices[0].uv, [0.25, 0.75]);
@@ -109,7 +118,13 @@ end_header
 ";
     let (_, c) = read_ok("partial.ply", text.as_bytes());
     assert_eq!(c.headers[0].attributes, Attributes::default());
-    assert_eq!(c.vertices[0], Vertex { position: [0.0; 3], ..Vertex::default() });
+    assert_eq!(
+        c.vertices[0],
+        Vertex {
+            position: [0.0; 3],
+            ..Vertex::default()
+        }
+    );
 }
 
 /// Binary header + body helper.
@@ -136,7 +151,10 @@ property list uchar int vertex_indices
 
 fn le_rgba_body() -> Vec<u8> {
     let mut b = Vec::new();
-    for (i, p) in [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]].iter().enumerate() {
+    for (i, p) in [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]
+        .iter()
+        .enumerate()
+    {
         f32le(&mut b, p);
         f32le(&mut b, &[0.0, 0.0, 1.0]);
         b.extend_from_slice(&[10 * i as u8, 20, 30, 40]);
@@ -150,9 +168,18 @@ fn le_rgba_body() -> Vec<u8> {
 
 #[test]
 fn binary_le_normals_and_rgba() {
-    let (r, c) =
-        read_ok("le.ply", &binary("binary_little_endian", LE_RGBA_HEADER, &le_rgba_body()));
-    assert_eq!(c.headers[0].attributes, Attributes { normals: true, colors: true, uvs: false });
+    let (r, c) = read_ok(
+        "le.ply",
+        &binary("binary_little_endian", LE_RGBA_HEADER, &le_rgba_body()),
+    );
+    assert_eq!(
+        c.headers[0].attributes,
+        Attributes {
+            normals: true,
+            colors: true,
+            uvs: false
+        }
+    );
     assert_eq!(c.vertices[1].color, [10, 20, 30, 40]);
     assert_eq!(c.vertices[2].position, [0.0, 1.0, 0.0]);
     assert_eq!(c.vertices[2].normal, [0.0, 0.0, 1.0]);
@@ -222,7 +249,10 @@ property list uchar uchar name
     }
     b.extend_from_slice(&[3, b'a', b'b', b'c']);
     let (r, c) = read_ok("be.ply", &binary("binary_big_endian", header, &b));
-    assert_eq!(pos(&c), vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 2.0, 0.0]]);
+    assert_eq!(
+        pos(&c),
+        vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 2.0, 0.0]]
+    );
     assert_eq!(c.triangles, vec![[0, 1, 2], [2, 1, 0]]);
     assert_eq!(r.ignored_statements, 3, "2 edges + 1 material");
 }
@@ -249,7 +279,10 @@ end_header
 2 0 1
 ";
     let (r, c) = read_ok("skip.ply", text.as_bytes());
-    assert_eq!(pos(&c), vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]);
+    assert_eq!(
+        pos(&c),
+        vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]
+    );
     assert_eq!(r.triangles, 1);
     assert_eq!(r.ignored_statements, 1);
 }
@@ -287,7 +320,10 @@ fn header_errors() {
     malformed_with(&e, "magic");
     let e = read_err("empty-file.ply", b"");
     malformed_with(&e, "magic");
-    let e = read_err("fmt.ply", b"ply\nformat binary_middle_endian 1.0\nend_header\n");
+    let e = read_err(
+        "fmt.ply",
+        b"ply\nformat binary_middle_endian 1.0\nend_header\n",
+    );
     malformed_with(&e, "binary_middle_endian");
     let e = read_err("nofmt.ply", b"ply\nelement vertex 0\nend_header\n");
     malformed_with(&e, "format");
@@ -321,9 +357,15 @@ fn header_errors() {
           element vertex 3\nproperty float x\nproperty float y\nproperty float z\nend_header\n",
     );
     malformed_with(&e, "before");
-    let e = read_err("prop.ply", b"ply\nformat ascii 1.0\nproperty float x\nend_header\n");
+    let e = read_err(
+        "prop.ply",
+        b"ply\nformat ascii 1.0\nproperty float x\nend_header\n",
+    );
     malformed_with(&e, "before any element");
-    let e = read_err("count.ply", b"ply\nformat ascii 1.0\nelement vertex -3\nend_header\n");
+    let e = read_err(
+        "count.ply",
+        b"ply\nformat ascii 1.0\nelement vertex -3\nend_header\n",
+    );
     malformed_with(&e, "-3");
 }
 
@@ -347,17 +389,36 @@ fn too_many_vertices() {
 fn index_out_of_range() {
     let text = ASCII_QUAD.replace("3 0 1 4", "3 0 1 5");
     let e = read_err("oor.ply", text.as_bytes());
-    assert!(matches!(e, MeshError::IndexOutOfRange { index: 5, vertex_count: 5, .. }), "{e}");
+    assert!(
+        matches!(
+            e,
+            MeshError::IndexOutOfRange {
+                index: 5,
+                vertex_count: 5,
+                ..
+            }
+        ),
+        "{e}"
+    );
     assert!(e.to_string().contains("face 1"), "{e}");
     let text = ASCII_QUAD.replace("3 0 1 4", "3 0 -1 4");
     let e = read_err("neg.ply", text.as_bytes());
-    assert!(matches!(e, MeshError::IndexOutOfRange { index: -1, .. }), "{e}");
+    assert!(
+        matches!(e, MeshError::IndexOutOfRange { index: -1, .. }),
+        "{e}"
+    );
     // Binary, fast path, negative int.
     let mut body = le_rgba_body();
     let n = body.len();
     body[n - 4..].copy_from_slice(&(-7i32).to_le_bytes());
-    let e = read_err("oorb.ply", &binary("binary_little_endian", LE_RGBA_HEADER, &body));
-    assert!(matches!(e, MeshError::IndexOutOfRange { index: -7, .. }), "{e}");
+    let e = read_err(
+        "oorb.ply",
+        &binary("binary_little_endian", LE_RGBA_HEADER, &body),
+    );
+    assert!(
+        matches!(e, MeshError::IndexOutOfRange { index: -7, .. }),
+        "{e}"
+    );
 }
 
 #[test]
@@ -367,7 +428,10 @@ fn non_finite_coordinates_are_errors() {
     assert!(matches!(e, MeshError::NonFinite { vertex: 2, .. }), "{e}");
     let mut body = le_rgba_body();
     body[4..8].copy_from_slice(&f32::INFINITY.to_le_bytes());
-    let e = read_err("inf.ply", &binary("binary_little_endian", LE_RGBA_HEADER, &body));
+    let e = read_err(
+        "inf.ply",
+        &binary("binary_little_endian", LE_RGBA_HEADER, &body),
+    );
     assert!(matches!(e, MeshError::NonFinite { vertex: 0, .. }), "{e}");
 }
 
@@ -384,7 +448,9 @@ fn empty_mesh_is_an_error() {
     let text = ASCII_QUAD.replace("element face 2", "element face 0");
     let e = read_err("empty.ply", text.as_bytes());
     assert!(matches!(e, MeshError::Empty { .. }), "{e}");
-    let text = ASCII_QUAD.replace("3 0 1 4", "3 0 1 1").replace("4 0 1 2 3", "2 0 1");
+    let text = ASCII_QUAD
+        .replace("3 0 1 4", "3 0 1 1")
+        .replace("4 0 1 2 3", "2 0 1");
     let e = read_err("alldeg.ply", text.as_bytes());
     assert!(matches!(e, MeshError::Empty { .. }), "{e}");
 }
@@ -417,7 +483,10 @@ fn visitor_errors_pass_through() {
     let path = dir.path().join("v.ply");
     std::fs::write(&path, ASCII_QUAD).unwrap();
     let e = read_mesh(&path, &mut Fail).unwrap_err();
-    assert!(matches!(&e, MeshError::Visitor(m) if m == "disk full"), "{e}");
+    assert!(
+        matches!(&e, MeshError::Visitor(m) if m == "disk full"),
+        "{e}"
+    );
 }
 
 // ---------------------------------------------------------------------------------------
@@ -476,7 +545,11 @@ fn writer_round_trip_all_attribute_combinations() {
         .collect();
     let triangles = [[0, 1, 2], [2, 3, 0], [3, 1, 0]];
     for bits in 0..8 {
-        let a = Attributes { normals: bits & 1 != 0, colors: bits & 2 != 0, uvs: bits & 4 != 0 };
+        let a = Attributes {
+            normals: bits & 1 != 0,
+            colors: bits & 2 != 0,
+            uvs: bits & 4 != 0,
+        };
         let (c, r) = write_and_read(a, &vertices, &triangles);
         assert_eq!(c.headers[0].attributes, a);
         assert_eq!(c.headers[0].vertex_count, Some(4));
@@ -495,13 +568,24 @@ fn arb_mesh() -> impl Strategy<Value = (Attributes, Vec<Vertex>, Vec<[u32; 3]>)>
         prop::array::uniform4(any::<u8>()),
         prop::array::uniform2(-4f32..4.0),
     )
-        .prop_map(|(position, normal, color, uv)| Vertex { position, normal, color, uv });
-    let attrs = (any::<bool>(), any::<bool>(), any::<bool>())
-        .prop_map(|(normals, colors, uvs)| Attributes { normals, colors, uvs });
+        .prop_map(|(position, normal, color, uv)| Vertex {
+            position,
+            normal,
+            color,
+            uv,
+        });
+    let attrs = (any::<bool>(), any::<bool>(), any::<bool>()).prop_map(|(normals, colors, uvs)| {
+        Attributes {
+            normals,
+            colors,
+            uvs,
+        }
+    });
     (attrs, prop::collection::vec(vertex, 3..40)).prop_flat_map(|(a, vs)| {
         let n = vs.len() as u32;
-        let tri = prop::array::uniform3(0..n)
-            .prop_filter("non-degenerate", |t| t[0] != t[1] && t[1] != t[2] && t[0] != t[2]);
+        let tri = prop::array::uniform3(0..n).prop_filter("non-degenerate", |t| {
+            t[0] != t[1] && t[1] != t[2] && t[0] != t[2]
+        });
         (Just(a), Just(vs), prop::collection::vec(tri, 1..60))
     })
 }
@@ -568,8 +652,11 @@ fn binary_parse_speed() {
     let mut w = PlyWriter::create(&path, &opts).unwrap();
     for y in 0..side {
         for x in 0..side {
-            w.write_vertex(&Vertex { position: [x as f32, y as f32, 0.0], ..Vertex::default() })
-                .unwrap();
+            w.write_vertex(&Vertex {
+                position: [x as f32, y as f32, 0.0],
+                ..Vertex::default()
+            })
+            .unwrap();
         }
     }
     for y in 0..side - 1 {

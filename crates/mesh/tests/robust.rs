@@ -32,7 +32,12 @@ fn ply_binary() -> Vec<u8> {
 property float y\nproperty float z\nproperty uchar red\nproperty uchar green\nproperty uchar blue\n\
 element face 2\nproperty list uchar uint vertex_indices\nelement other 1\nproperty short q\nend_header\n"
         .to_vec();
-    for p in [[0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]] {
+    for p in [
+        [0f32, 0.0, 0.0],
+        [1.0, 0.0, 0.0],
+        [1.0, 1.0, 0.0],
+        [0.0, 1.0, 0.0],
+    ] {
         f32le(&mut b, &p);
         b.extend_from_slice(&[1, 2, 3]);
     }

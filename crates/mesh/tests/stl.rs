@@ -95,13 +95,19 @@ fn binary_nan_and_empty() {
 
 #[test]
 fn ascii_errors() {
-    let e = read_err("bad.stl", ASCII.replace("vertex 1 0 0", "vertex 1 zero 0").as_bytes());
+    let e = read_err(
+        "bad.stl",
+        ASCII.replace("vertex 1 0 0", "vertex 1 zero 0").as_bytes(),
+    );
     assert!(matches!(e, MeshError::Malformed { .. }), "{e}");
     assert!(e.to_string().contains("line 5"), "{e}");
     let cut = &ASCII[..ASCII.find("endloop").unwrap()];
     let e = read_err("cut.stl", cut.as_bytes());
     assert!(matches!(e, MeshError::Truncated { .. }), "{e}");
-    let e = read_err("nan2.stl", ASCII.replace("vertex 1 1 0", "vertex 1 NaN 0").as_bytes());
+    let e = read_err(
+        "nan2.stl",
+        ASCII.replace("vertex 1 1 0", "vertex 1 NaN 0").as_bytes(),
+    );
     assert!(matches!(e, MeshError::NonFinite { .. }), "{e}");
     let e = read_err("empty2.stl", b"solid x\nendsolid x\n");
     assert!(matches!(e, MeshError::Empty { .. }), "{e}");

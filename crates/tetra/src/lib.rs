@@ -33,8 +33,14 @@ pub type Point = [i64; 3];
 
 /// Axis orders of the six Kuhn tetrahedra: root `r` is the set of cube points with
 /// `p[o[0]] >= p[o[1]] >= p[o[2]]` for `o = ROOT_AXES[r]`.
-pub const ROOT_AXES: [[usize; 3]; 6] =
-    [[0, 1, 2], [0, 2, 1], [1, 0, 2], [1, 2, 0], [2, 0, 1], [2, 1, 0]];
+pub const ROOT_AXES: [[usize; 3]; 6] = [
+    [0, 1, 2],
+    [0, 2, 1],
+    [1, 0, 2],
+    [1, 2, 0],
+    [2, 0, 1],
+    [2, 1, 0],
+];
 
 /// One tetrahedron of the forest.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -98,7 +104,13 @@ impl Locator {
     /// Locates points given in lattice units times `scale`, down to `depth`.
     pub fn new(depth: u8, scale: i64) -> Locator {
         let depth = depth.min(MAX_LEVEL);
-        Locator { depth, scale, root: None, chain: Vec::with_capacity(depth as usize), taken: vec![0; depth as usize] }
+        Locator {
+            depth,
+            scale,
+            root: None,
+            chain: Vec::with_capacity(depth as usize),
+            taken: vec![0; depth as usize],
+        }
     }
 
     /// Depth-first key (see [`Tet::dfs_key`]) of the tetrahedron at `depth` holding `p`,
@@ -108,7 +120,9 @@ impl Locator {
         if p.iter().any(|&c| c < 0 || c > CUBE * s) {
             return None;
         }
-        let r = ROOT_AXES.iter().position(|o| p[o[0]] >= p[o[1]] && p[o[1]] >= p[o[2]])? as u8;
+        let r = ROOT_AXES
+            .iter()
+            .position(|o| p[o[0]] >= p[o[1]] && p[o[1]] >= p[o[2]])? as u8;
         let mut from = 0usize;
         if self.root == Some(r) && self.chain.len() == self.depth as usize {
             while from < self.chain.len() {
@@ -170,7 +184,13 @@ impl Tet {
             x1[o[0]] = CUBE;
             let mut x2 = x1;
             x2[o[1]] = CUBE;
-            Tet { v: [[0; 3], x1, x2, [CUBE; 3]], tag: 3, level: 0, root: r as u8, path: 0 }
+            Tet {
+                v: [[0; 3], x1, x2, [CUBE; 3]],
+                tag: 3,
+                level: 0,
+                root: r as u8,
+                path: 0,
+            }
         })
     }
 
@@ -180,7 +200,10 @@ impl Tet {
         if p.iter().any(|&c| !(0..=CUBE).contains(&c)) {
             return None;
         }
-        ROOT_AXES.iter().position(|o| p[o[0]] >= p[o[1]] && p[o[1]] >= p[o[2]]).map(|r| r as u8)
+        ROOT_AXES
+            .iter()
+            .position(|o| p[o[0]] >= p[o[1]] && p[o[1]] >= p[o[2]])
+            .map(|r| r as u8)
     }
 
     /// The two children (bisection at the midpoint of the refinement edge).
@@ -197,8 +220,20 @@ impl Tet {
         let level = self.level + 1;
         let bit = 1u64 << self.level;
         [
-            Tet { v: a, tag, level, root: self.root, path: self.path },
-            Tet { v: b, tag, level, root: self.root, path: self.path | bit },
+            Tet {
+                v: a,
+                tag,
+                level,
+                root: self.root,
+                path: self.path,
+            },
+            Tet {
+                v: b,
+                tag,
+                level,
+                root: self.root,
+                path: self.path | bit,
+            },
         ]
     }
 
@@ -210,7 +245,10 @@ impl Tet {
     /// The diamond this tetrahedron belongs to (the one that bisects it).
     pub fn diamond(&self) -> DiamondKey {
         let (a, b) = self.refinement_edge();
-        DiamondKey { level: self.level, center2: [a[0] + b[0], a[1] + b[1], a[2] + b[2]] }
+        DiamondKey {
+            level: self.level,
+            center2: [a[0] + b[0], a[1] + b[1], a[2] + b[2]],
+        }
     }
 
     /// Sum of the four vertices (4x the centroid), a lattice point inside the tetrahedron.
@@ -251,7 +289,11 @@ impl Tet {
         ];
         debug_assert_eq!(normal, normalise(cross(a, b)));
         let x0_positive = dot(normal, sub(scale2(x[0], 2), z2)) > 0;
-        SplitPlane { normal, z2, x0_positive }
+        SplitPlane {
+            normal,
+            z2,
+            x0_positive,
+        }
     }
 
     /// Descendant at `level` containing the scaled point (see [`Tet::locate_child_scaled`]).
@@ -270,7 +312,9 @@ impl Tet {
         if q.iter().any(|&c| c < 0 || c > CUBE * scale) {
             return None;
         }
-        let r = ROOT_AXES.iter().position(|o| q[o[0]] >= q[o[1]] && q[o[1]] >= q[o[2]])?;
+        let r = ROOT_AXES
+            .iter()
+            .position(|o| q[o[0]] >= q[o[1]] && q[o[1]] >= q[o[2]])?;
         Some(Tet::roots()[r].descend_scaled(p, scale, level))
     }
 
@@ -398,7 +442,11 @@ fn scale2(a: Point, s: i64) -> Point {
 }
 fn cross(a: Point, b: Point) -> [i128; 3] {
     let (a, b) = (a.map(|x| x as i128), b.map(|x| x as i128));
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
 }
 /// Scale a plane normal to entries in {-1, 0, 1}: for this hierarchy every non-zero
 /// entry has the same magnitude, so the signs are the normal.
@@ -410,7 +458,11 @@ fn normalise(n: [i128; 3]) -> Point {
         },
         "unexpected plane {n:?}"
     );
-    [n[0].signum() as i64, n[1].signum() as i64, n[2].signum() as i64]
+    [
+        n[0].signum() as i64,
+        n[1].signum() as i64,
+        n[2].signum() as i64,
+    ]
 }
 fn dot(a: Point, b: Point) -> i64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]

@@ -63,7 +63,10 @@ fn children_tile_parent_and_refinement_edge_is_longest() {
         let l = len2(p, q);
         for i in 0..4 {
             for j in i + 1..4 {
-                assert!(len2(t.v[i], t.v[j]) <= l, "refinement edge not longest in {t:?}");
+                assert!(
+                    len2(t.v[i], t.v[j]) <= l,
+                    "refinement edge not longest in {t:?}"
+                );
             }
         }
         assert_eq!(a.parent(), Some(t));
@@ -85,9 +88,8 @@ fn uniform_refinements_are_conforming() {
             }
         }
         for (f, n) in faces {
-            let on_boundary = (0..3).any(|ax| {
-                f.iter().all(|p| p[ax] == 0) || f.iter().all(|p| p[ax] == CUBE)
-            });
+            let on_boundary =
+                (0..3).any(|ax| f.iter().all(|p| p[ax] == 0) || f.iter().all(|p| p[ax] == CUBE));
             let expect = if on_boundary { 1 } else { 2 };
             assert_eq!(n, expect, "level {level}: face {f:?} shared by {n}");
         }
@@ -102,10 +104,14 @@ fn diamonds_by_probing_match_brute_force() {
         let tets = uniform(level);
         let mut groups: HashMap<DiamondKey, Vec<(u8, u64)>> = HashMap::new();
         for t in &tets {
-            groups.entry(t.diamond()).or_default().push((t.root, t.path));
+            groups
+                .entry(t.diamond())
+                .or_default()
+                .push((t.root, t.path));
         }
         for t in &tets {
-            let mates: Vec<(u8, u64)> = t.diamond_mates().iter().map(|m| (m.root, m.path)).collect();
+            let mates: Vec<(u8, u64)> =
+                t.diamond_mates().iter().map(|m| (m.root, m.path)).collect();
             let mut expect = groups[&t.diamond()].clone();
             expect.sort();
             assert_eq!(mates, expect, "level {level} tet {t:?}");

@@ -36,8 +36,16 @@ pub struct Built {
 pub fn build_sphere(triangles: u64, seed: u64, colors: bool, opts: &BuildOptions) -> Built {
     let dir = tempfile::tempdir().expect("tempdir");
     let input = dir.path().join(format!("sphere-{triangles}-{seed}.ply"));
-    tessera_gen::write_sphere(&input, &tessera_gen::SphereOptions { triangles, seed, colors, noise: 0.05 })
-        .expect("generate sphere");
+    tessera_gen::write_sphere(
+        &input,
+        &tessera_gen::SphereOptions {
+            triangles,
+            seed,
+            colors,
+            noise: 0.05,
+        },
+    )
+    .expect("generate sphere");
     build_file(dir, input, opts)
 }
 
@@ -47,19 +55,36 @@ pub fn build_file(dir: tempfile::TempDir, input: PathBuf, opts: &BuildOptions) -
     let report = tessera_build::build(&input, &model_path, opts, &NoProgress)
         .unwrap_or_else(|e| panic!("building {}: {e}", input.display()));
     let model = Model::open(&model_path).expect("open built model");
-    Built { dir, input, model_path, report, model }
+    Built {
+        dir,
+        input,
+        model_path,
+        report,
+        model,
+    }
 }
 
 /// Every patch of a model, decoded once.
 pub fn decode_all(m: &Model) -> Vec<PatchData> {
-    (0..m.nodes().len()).map(|i| m.decode_patch(i).unwrap_or_else(|e| panic!("node {i}: {e}"))).collect()
+    (0..m.nodes().len())
+        .map(|i| {
+            m.decode_patch(i)
+                .unwrap_or_else(|e| panic!("node {i}: {e}"))
+        })
+        .collect()
 }
 
 /// Merges the patches of `nodes` (from pre-decoded `patches`) into one mesh.
 pub fn merge(patches: &[PatchData], nodes: &[u32]) -> CutMesh {
     merge_patches(nodes.iter().map(|&i| {
         let p = &patches[i as usize];
-        PatchRef { positions: &p.positions, normals: &p.normals, colors: &p.colors, uvs: &p.uvs, indices: &p.indices }
+        PatchRef {
+            positions: &p.positions,
+            normals: &p.normals,
+            colors: &p.colors,
+            uvs: &p.uvs,
+            indices: &p.indices,
+        }
     }))
 }
 
@@ -85,7 +110,11 @@ pub fn describe_bad_edges(
     for &n in nodes {
         let p = &patches[n as usize];
         for t in p.indices.chunks_exact(3) {
-            let c = [p.positions[t[0] as usize], p.positions[t[1] as usize], p.positions[t[2] as usize]];
+            let c = [
+                p.positions[t[0] as usize],
+                p.positions[t[1] as usize],
+                p.positions[t[2] as usize],
+            ];
             if c[0] == c[1] || c[1] == c[2] || c[2] == c[0] {
                 continue;
             }
@@ -95,8 +124,10 @@ pub fn describe_bad_edges(
             }
         }
     }
-    let mut bad: Vec<_> =
-        uses.into_iter().filter(|((a, b), v)| v.len() > 2 || (v.len() == 1 && !allowed_boundary(*a, *b))).collect();
+    let mut bad: Vec<_> = uses
+        .into_iter()
+        .filter(|((a, b), v)| v.len() > 2 || (v.len() == 1 && !allowed_boundary(*a, *b)))
+        .collect();
     bad.sort();
     let mut by_node: HashMap<u32, usize> = HashMap::new();
     for (_, v) in &bad {
@@ -107,13 +138,23 @@ pub fn describe_bad_edges(
     let mut nodes_hit: Vec<_> = by_node.into_iter().collect();
     nodes_hit.sort_by_key(|&(n, c)| (std::cmp::Reverse(c), n));
     let all = m.nodes();
-    let mut s = format!("{} bad edges; patches touching them (node/level/bad edges): ", bad.len());
+    let mut s = format!(
+        "{} bad edges; patches touching them (node/level/bad edges): ",
+        bad.len()
+    );
     for (n, c) in nodes_hit.iter().take(12) {
         s += &format!("{n}/L{}/{c} ", all[*n as usize].level);
     }
     for ((a, b), v) in bad.iter().take(limit) {
-        let lv: Vec<String> = v.iter().map(|&n| format!("{n}(L{})", all[n as usize].level)).collect();
-        s += &format!("\n    edge {a:?}-{b:?} used {} times by {}", v.len(), lv.join(", "));
+        let lv: Vec<String> = v
+            .iter()
+            .map(|&n| format!("{n}(L{})", all[n as usize].level))
+            .collect();
+        s += &format!(
+            "\n    edge {a:?}-{b:?} used {} times by {}",
+            v.len(),
+            lv.join(", ")
+        );
     }
     s
 }
@@ -147,7 +188,8 @@ impl MeshVisitor for InputMesh {
 
 pub fn read_input(path: &Path) -> InputMesh {
     let mut m = InputMesh::default();
-    tessera_mesh::read_mesh(path, &mut m).unwrap_or_else(|e| panic!("reading {}: {e}", path.display()));
+    tessera_mesh::read_mesh(path, &mut m)
+        .unwrap_or_else(|e| panic!("reading {}: {e}", path.display()));
     m
 }
 
@@ -155,7 +197,11 @@ pub fn read_input(path: &Path) -> InputMesh {
 /// `q = round((p - cube_origin) / cube_size * 2^quant_bits)`, clamped into the grid.
 pub fn quantize(h: &Header, p: [f32; 3]) -> [u32; 3] {
     let n = (h.quant_bits as f64).exp2();
-    std::array::from_fn(|i| ((f64::from(p[i]) - h.cube_origin[i]) / h.cube_size * n).round().clamp(0.0, n) as u32)
+    std::array::from_fn(|i| {
+        ((f64::from(p[i]) - h.cube_origin[i]) / h.cube_size * n)
+            .round()
+            .clamp(0.0, n) as u32
+    })
 }
 
 /// A triangle of grid points rotated so that its smallest corner comes first
@@ -166,9 +212,18 @@ pub fn canonical_triangle(t: [[u32; 3]; 3]) -> [[u32; 3]; 3] {
 }
 
 /// Sorted canonical triangles of grid positions.
-pub fn triangle_set(positions: &[[u32; 3]], indices: impl Iterator<Item = [u32; 3]>) -> Vec<[[u32; 3]; 3]> {
+pub fn triangle_set(
+    positions: &[[u32; 3]],
+    indices: impl Iterator<Item = [u32; 3]>,
+) -> Vec<[[u32; 3]; 3]> {
     let mut v: Vec<_> = indices
-        .map(|t| canonical_triangle([positions[t[0] as usize], positions[t[1] as usize], positions[t[2] as usize]]))
+        .map(|t| {
+            canonical_triangle([
+                positions[t[0] as usize],
+                positions[t[1] as usize],
+                positions[t[2] as usize],
+            ])
+        })
         .collect();
     v.sort_unstable();
     v
@@ -179,7 +234,11 @@ pub fn point_triangle_dist2(p: [f64; 3], a: [f64; 3], b: [f64; 3], c: [f64; 3]) 
     let sub = |x: [f64; 3], y: [f64; 3]| [x[0] - y[0], x[1] - y[1], x[2] - y[2]];
     let dot = |x: [f64; 3], y: [f64; 3]| x[0] * y[0] + x[1] * y[1] + x[2] * y[2];
     let at = |o: [f64; 3], u: [f64; 3], s: f64, v: [f64; 3], t: f64| {
-        [o[0] + u[0] * s + v[0] * t, o[1] + u[1] * s + v[1] * t, o[2] + u[2] * s + v[2] * t]
+        [
+            o[0] + u[0] * s + v[0] * t,
+            o[1] + u[1] * s + v[1] * t,
+            o[2] + u[2] * s + v[2] * t,
+        ]
     };
     let d2 = |q: [f64; 3]| {
         let d = sub(p, q);
@@ -243,7 +302,11 @@ impl XorShift {
     /// Uniform direction on the unit sphere.
     pub fn direction(&mut self) -> [f64; 3] {
         loop {
-            let v = [self.range(-1.0, 1.0), self.range(-1.0, 1.0), self.range(-1.0, 1.0)];
+            let v = [
+                self.range(-1.0, 1.0),
+                self.range(-1.0, 1.0),
+                self.range(-1.0, 1.0),
+            ];
             let l2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
             if l2 > 1e-4 && l2 <= 1.0 {
                 let l = l2.sqrt();
@@ -262,8 +325,16 @@ pub fn tessera() -> Command {
 
 /// Runs `tessera ARGS`, returning (exit code, stdout, stderr).
 pub fn run_tessera(args: &[&std::ffi::OsStr]) -> (i32, String, String) {
-    let Output { status, stdout, stderr } = tessera().args(args).output().expect("run tessera");
-    (status.code().unwrap_or(-1), String::from_utf8_lossy(&stdout).into_owned(), String::from_utf8_lossy(&stderr).into_owned())
+    let Output {
+        status,
+        stdout,
+        stderr,
+    } = tessera().args(args).output().expect("run tessera");
+    (
+        status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&stdout).into_owned(),
+        String::from_utf8_lossy(&stderr).into_owned(),
+    )
 }
 
 /// Convenience: arguments as OsStr from anything path-like or string-like.
@@ -279,7 +350,9 @@ pub fn leftovers(dir: &Path) -> Vec<String> {
         .map(|rd| {
             rd.filter_map(|e| e.ok())
                 .map(|e| e.file_name().to_string_lossy().into_owned())
-                .filter(|n| n.starts_with(".tessera-build-") || (n.starts_with('.') && n.contains(".tmp-")))
+                .filter(|n| {
+                    n.starts_with(".tessera-build-") || (n.starts_with('.') && n.contains(".tmp-"))
+                })
                 .collect()
         })
         .unwrap_or_default()

@@ -15,7 +15,10 @@ pub struct Collect {
 
 impl MeshVisitor for Collect {
     fn header(&mut self, header: &MeshHeader) -> Result<(), MeshError> {
-        assert!(self.vertices.is_empty() && self.triangles.is_empty(), "header after data");
+        assert!(
+            self.vertices.is_empty() && self.triangles.is_empty(),
+            "header after data"
+        );
         self.headers.push(header.clone());
         Ok(())
     }

@@ -1,0 +1,197 @@
+//! `tessera render`: render a camera path (or an orbit) of a model to PNG frames with
+//! per-frame statistics, headless (lavapipe on a machine without a GPU).
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::Arc;
+use std::time::Instant;
+
+use anyhow::{bail, Context};
+use serde_json::json;
+use tessera_format::Model;
+use tessera_render::{CameraPath, FrameStats, Mode, Viewer, ViewerOptions};
+
+#[derive(clap::Args)]
+#[command(group(
+    clap::ArgGroup::new("cameras").required(true).multiple(false).args(["path", "orbit"])
+))]
+pub struct Args {
+    /// The model (.tsr).
+    model: PathBuf,
+    /// Camera path (JSON keyframes, see docs/camera.md).
+    #[arg(long, value_name = "PATH.json")]
+    path: Option<PathBuf>,
+    /// Render N frames orbiting the model's bounding sphere instead of a path file.
+    #[arg(long, value_name = "N")]
+    orbit: Option<u32>,
+    /// Directory for the PNG frames (created if missing).
+    #[arg(long, value_name = "DIR")]
+    out: Option<PathBuf>,
+    /// Image width, pixels.
+    #[arg(long, default_value_t = 1280)]
+    width: u32,
+    /// Image height, pixels.
+    #[arg(long, default_value_t = 720)]
+    height: u32,
+    /// Screen-space error tolerance, pixels.
+    #[arg(long, default_value_t = 1.0)]
+    tolerance: f32,
+    /// Write per-frame statistics (JSON) here.
+    #[arg(long, value_name = "STATS.json")]
+    stats: Option<PathBuf>,
+    /// Draw every leaf, no level of detail and no culling (the brute-force reference).
+    #[arg(long, conflicts_with = "complete")]
+    full_resolution: bool,
+    /// Every frame waits until its whole cut is loaded (offline rendering); by default
+    /// frames never wait and show coarser nodes while patches stream in.
+    #[arg(long)]
+    complete: bool,
+    /// Total memory budget: half for the GPU patch cache, a quarter for decoded patches
+    /// in RAM.
+    #[arg(long, default_value = "512M", value_parser = crate::parse_bytes)]
+    memory: u64,
+    /// Loader threads (progressive mode).
+    #[arg(long, default_value_t = 1)]
+    loaders: usize,
+    /// Keep patches outside the frustum or facing away.
+    #[arg(long)]
+    no_cull: bool,
+    /// Do not prefetch beyond the current view.
+    #[arg(long)]
+    no_prefetch: bool,
+}
+
+fn current_rss_bytes() -> u64 {
+    // Second field of /proc/self/statm: resident pages.
+    std::fs::read_to_string("/proc/self/statm")
+        .ok()
+        .and_then(|s| {
+            s.split_whitespace()
+                .nth(1)
+                .and_then(|v| v.parse::<u64>().ok())
+        })
+        .map_or(0, |pages| pages * 4096)
+}
+
+pub fn run(a: Args) -> anyhow::Result<ExitCode> {
+    if a.width == 0 || a.height == 0 || a.width > 16384 || a.height > 16384 {
+        bail!("--width and --height must be between 1 and 16384");
+    }
+    if !(a.tolerance.is_finite() && a.tolerance > 0.0) {
+        bail!("--tolerance must be a positive number of pixels");
+    }
+    if a.orbit == Some(0) {
+        bail!("--orbit needs at least one frame");
+    }
+    let model = Arc::new(
+        Model::open(&a.model).with_context(|| format!("cannot open {}", a.model.display()))?,
+    );
+    let path = match (&a.path, a.orbit) {
+        (Some(p), _) => CameraPath::from_file(p, a.width, a.height)?,
+        (None, Some(n)) => CameraPath::orbit(model.header().bounding_sphere, n, a.width, a.height),
+        (None, None) => bail!("give --path or --orbit"),
+    };
+    if let Some(dir) = &a.out {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    }
+    let mode = if a.full_resolution {
+        Mode::FullResolution
+    } else if a.complete {
+        Mode::Complete
+    } else {
+        Mode::Progressive
+    };
+    let opts = ViewerOptions {
+        tolerance_px: a.tolerance,
+        cull: !a.no_cull,
+        mode,
+        gpu_budget_bytes: a.memory / 2,
+        ram_budget_bytes: a.memory / 4,
+        loader_threads: a.loaders.max(1),
+        prefetch: !a.no_prefetch,
+        ..Default::default()
+    };
+    let t_open = Instant::now();
+    let mut viewer = Viewer::new(model.clone(), opts)?;
+    let setup_ms = t_open.elapsed().as_secs_f64() * 1e3;
+    let adapter = viewer.gpu().adapter_label.clone();
+    let cameras = path.cameras();
+    let mut frames: Vec<serde_json::Value> = Vec::with_capacity(cameras.len());
+    let mut all: Vec<FrameStats> = Vec::with_capacity(cameras.len());
+    let mut peak_rss = current_rss_bytes();
+    for (i, cam) in cameras.iter().enumerate() {
+        let s = viewer.render(cam)?;
+        if let Some(dir) = &a.out {
+            let img = viewer.read_image()?;
+            img.save_png(&dir.join(format!("frame_{i:05}.png")))?;
+        }
+        let rss = current_rss_bytes();
+        peak_rss = peak_rss.max(rss);
+        let mut v = serde_json::to_value(&s)?;
+        v["rss_bytes"] = json!(rss);
+        frames.push(v);
+        all.push(s);
+    }
+    let n = all.len().max(1) as f64;
+    let mean = |f: &dyn Fn(&FrameStats) -> f64| all.iter().map(f).sum::<f64>() / n;
+    let mut sorted: Vec<f64> = all.iter().map(|s| s.frame_ms).collect();
+    sorted.sort_by(f64::total_cmp);
+    let median_ms = sorted.get(sorted.len() / 2).copied().unwrap_or(0.0);
+    let summary = json!({
+        "frames": all.len(),
+        "mode": mode,
+        "mean_frame_ms": mean(&|s| s.frame_ms),
+        "median_frame_ms": median_ms,
+        "max_frame_ms": sorted.last().copied().unwrap_or(0.0),
+        "mean_selection_ms": mean(&|s| s.selection_ms),
+        "mean_triangles": mean(&|s| s.triangles as f64),
+        "bytes_uploaded": all.iter().map(|s| s.bytes_uploaded).sum::<u64>(),
+        "failed_patches": all.last().map_or(0, |s| s.failed_patches),
+        "peak_rss_bytes": peak_rss,
+        "setup_ms": setup_ms,
+    });
+    if let Some(p) = &a.stats {
+        let doc = json!({
+            "model": a.model.display().to_string(),
+            "adapter": adapter,
+            "width": a.width,
+            "height": a.height,
+            "tolerance_px": a.tolerance,
+            "memory_budget_bytes": a.memory,
+            "summary": summary,
+            "frames": frames,
+        });
+        write_atomic(p, serde_json::to_string_pretty(&doc)?.as_bytes())?;
+    }
+    println!(
+        "{} frames ({:?}) on {}: mean {:.1} ms/frame (median {:.1}), {:.0} triangles/frame, selection {:.3} ms, peak RSS {} MiB",
+        all.len(),
+        mode,
+        adapter,
+        summary["mean_frame_ms"].as_f64().unwrap_or(0.0),
+        median_ms,
+        summary["mean_triangles"].as_f64().unwrap_or(0.0),
+        summary["mean_selection_ms"].as_f64().unwrap_or(0.0),
+        peak_rss >> 20,
+    );
+    let failed = all.last().map_or(0, |s| s.failed_patches);
+    if failed > 0 {
+        eprintln!("warning: {failed} corrupt patch(es) skipped; their parents were drawn");
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn write_atomic(path: &std::path::Path, bytes: &[u8]) -> anyhow::Result<()> {
+    use std::io::Write;
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(std::path::Path::new("."));
+    let mut tmp = tempfile::NamedTempFile::new_in(dir)
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    tmp.write_all(bytes)?;
+    tmp.as_file().sync_all()?;
+    tmp.persist(path)
+        .map_err(|e| anyhow::anyhow!("cannot write {}: {}", path.display(), e.error))?;
+    Ok(())
+}

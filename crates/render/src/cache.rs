@@ -1,0 +1,397 @@
+//! The GPU patch cache: two big buffers (vertices, indices) carved up by range
+//! allocators, a byte budget, and least-recently-used eviction.
+//!
+//! Why two big buffers and not one buffer per patch: a cut is hundreds to thousands of
+//! patches; one buffer per patch means one allocation per upload and a vertex/index
+//! buffer rebind per draw, and GPU allocators round small buffers up. Here a patch is a
+//! vertex range and an index range; every draw uses the same two bindings and picks its
+//! patch with `base_vertex` and the index range. The allocator is `range-alloc` (the
+//! gfx-rs crate wgpu's own backends use), so nothing of this is hand-written but the
+//! bookkeeping.
+//!
+//! Eviction is by *group* (see [`crate::groups`]): the caller says which nodes travel
+//! together and which were used this frame; only groups not used this frame are evicted.
+
+use std::ops::Range;
+
+use range_alloc::RangeAllocator;
+use rustc_hash::FxHashMap;
+use tessera_format::PatchData;
+
+/// One vertex as the shader reads it, 24 bytes.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct GpuVertex {
+    /// Local frame (model coordinates minus the cube origin).
+    pub position: [f32; 3],
+    /// Unit normal as snorm16 xyz (w = 0).
+    pub normal: [i16; 4],
+    /// RGBA8, white when the model has no colours.
+    pub color: [u8; 4],
+}
+
+/// Bytes per vertex.
+pub const VERTEX_BYTES: u64 = std::mem::size_of::<GpuVertex>() as u64;
+/// Bytes per index (u32 indices: patches may exceed 65536 vertices on odd inputs).
+pub const INDEX_BYTES: u64 = 4;
+
+/// Converts a decoded patch to GPU vertices, positions in the local frame
+/// (`grid * quant_step`).
+pub fn gpu_vertices(p: &PatchData, quant_step: f64, out: &mut Vec<GpuVertex>) {
+    out.clear();
+    out.reserve(p.positions.len());
+    let snorm = |x: f32| (x.clamp(-1.0, 1.0) * 32767.0).round() as i16;
+    for (i, q) in p.positions.iter().enumerate() {
+        let position = [
+            (q[0] as f64 * quant_step) as f32,
+            (q[1] as f64 * quant_step) as f32,
+            (q[2] as f64 * quant_step) as f32,
+        ];
+        let normal = match p.normals.get(i) {
+            Some(n) => [snorm(n[0]), snorm(n[1]), snorm(n[2]), 0],
+            None => [0; 4],
+        };
+        let color = p.colors.get(i).copied().unwrap_or([255; 4]);
+        out.push(GpuVertex {
+            position,
+            normal,
+            color,
+        });
+    }
+}
+
+/// Where a resident patch lives.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Slot {
+    /// Vertex range (in vertices) in the vertex buffer: draw with `base_vertex = start`.
+    pub vertices: Range<u32>,
+    /// Index range (in indices) in the index buffer.
+    pub indices: Range<u32>,
+    /// Group the node belongs to (eviction unit).
+    pub group: u32,
+}
+
+impl Slot {
+    /// GPU bytes held.
+    pub fn bytes(&self) -> u64 {
+        u64::from(self.vertices.end - self.vertices.start) * VERTEX_BYTES
+            + u64::from(self.indices.end - self.indices.start) * INDEX_BYTES
+    }
+}
+
+/// Why an upload did not happen.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum UploadError {
+    /// No room even after evicting everything not used this frame.
+    Full,
+    /// The patch alone is larger than a buffer.
+    TooBig,
+}
+
+/// Counters of the cache.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct GpuCacheStats {
+    pub resident_bytes: u64,
+    pub resident_patches: usize,
+    pub uploaded_bytes: u64,
+    pub uploads: u64,
+    pub evictions: u64,
+}
+
+/// The GPU patch cache. See the module docs.
+pub struct GpuCache {
+    pub vertex_buffer: wgpu::Buffer,
+    pub index_buffer: wgpu::Buffer,
+    vertex_alloc: RangeAllocator<u32>,
+    index_alloc: RangeAllocator<u32>,
+    /// Largest capacities (vertices, indices) the budget allows.
+    max_vertices: u32,
+    max_indices: u32,
+    slots: FxHashMap<u32, Slot>,
+    /// Resident members per group.
+    group_members: FxHashMap<u32, Vec<u32>>,
+    /// Frame in which each group was last used.
+    group_used: FxHashMap<u32, u64>,
+    stats: GpuCacheStats,
+    scratch: Vec<GpuVertex>,
+}
+
+/// Capacity each buffer starts with; it doubles on demand up to the budget, so memory
+/// follows what the views need (on lavapipe GPU memory is process memory, and wgpu
+/// zero-fills a buffer before its first use).
+const INITIAL_BUFFER_BYTES: u64 = 8 << 20;
+
+fn make_buffer(
+    device: &wgpu::Device,
+    label: &str,
+    bytes: u64,
+    usage: wgpu::BufferUsages,
+) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: bytes,
+        usage: usage | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
+        mapped_at_creation: false,
+    })
+}
+
+impl GpuCache {
+    /// Two buffers sharing `budget_bytes` (at most half each, clamped to the device's
+    /// maximum buffer size), starting small and growing on demand.
+    pub fn new(device: &wgpu::Device, budget_bytes: u64) -> GpuCache {
+        let max = device.limits().max_buffer_size;
+        let half = (budget_bytes / 2).clamp(1 << 20, max);
+        let max_vertices = (half / VERTEX_BYTES).min(u64::from(u32::MAX)) as u32;
+        let max_indices = (half / INDEX_BYTES).min(u64::from(u32::MAX)) as u32;
+        let start = INITIAL_BUFFER_BYTES.min(half);
+        let vcount = ((start / VERTEX_BYTES) as u32).min(max_vertices);
+        let icount = ((start / INDEX_BYTES) as u32).min(max_indices);
+        GpuCache {
+            vertex_buffer: make_buffer(
+                device,
+                "tessera patch cache: vertices",
+                u64::from(vcount) * VERTEX_BYTES,
+                wgpu::BufferUsages::VERTEX,
+            ),
+            index_buffer: make_buffer(
+                device,
+                "tessera patch cache: indices",
+                u64::from(icount) * INDEX_BYTES,
+                wgpu::BufferUsages::INDEX,
+            ),
+            vertex_alloc: RangeAllocator::new(0..vcount),
+            index_alloc: RangeAllocator::new(0..icount),
+            max_vertices,
+            max_indices,
+            slots: FxHashMap::default(),
+            group_members: FxHashMap::default(),
+            group_used: FxHashMap::default(),
+            stats: GpuCacheStats::default(),
+            scratch: Vec::new(),
+        }
+    }
+
+    /// GPU bytes of the two buffers (what the cache holds from the device).
+    pub fn capacity_bytes(&self) -> u64 {
+        self.vertex_buffer.size() + self.index_buffer.size()
+    }
+
+    /// Doubles whichever buffer lacks room for `nv` vertices / `ni` indices (copying the
+    /// contents on the GPU); false when both are at their maximum.
+    fn grow(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, nv: u32, ni: u32) -> bool {
+        let vcap = self.vertex_alloc.initial_range().end;
+        let icap = self.index_alloc.initial_range().end;
+        let want_v = self.vertex_alloc.total_available() < nv && vcap < self.max_vertices;
+        let want_i = self.index_alloc.total_available() < ni && icap < self.max_indices;
+        // Fragmentation: room in total but no contiguous range; grow whichever can.
+        let (want_v, want_i) = if want_v || want_i {
+            (want_v, want_i)
+        } else {
+            (vcap < self.max_vertices, icap < self.max_indices)
+        };
+        if !want_v && !want_i {
+            return false;
+        }
+        let mut enc = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("tessera patch cache growth"),
+        });
+        if want_v {
+            let new_cap = vcap.saturating_mul(2).max(nv).min(self.max_vertices);
+            let nb = make_buffer(
+                device,
+                "tessera patch cache: vertices",
+                u64::from(new_cap) * VERTEX_BYTES,
+                wgpu::BufferUsages::VERTEX,
+            );
+            enc.copy_buffer_to_buffer(&self.vertex_buffer, 0, &nb, 0, self.vertex_buffer.size());
+            self.vertex_buffer = nb;
+            self.vertex_alloc.grow_to(new_cap);
+        }
+        if want_i {
+            let new_cap = icap.saturating_mul(2).max(ni).min(self.max_indices);
+            let nb = make_buffer(
+                device,
+                "tessera patch cache: indices",
+                u64::from(new_cap) * INDEX_BYTES,
+                wgpu::BufferUsages::INDEX,
+            );
+            enc.copy_buffer_to_buffer(&self.index_buffer, 0, &nb, 0, self.index_buffer.size());
+            self.index_buffer = nb;
+            self.index_alloc.grow_to(new_cap);
+        }
+        // Submitted now: writes staged before it land first, later ones after the copy.
+        queue.submit([enc.finish()]);
+        true
+    }
+
+    /// The slot of a resident node.
+    #[inline]
+    pub fn slot(&self, node: u32) -> Option<&Slot> {
+        self.slots.get(&node)
+    }
+
+    /// Whether `node` is resident.
+    #[inline]
+    pub fn contains(&self, node: u32) -> bool {
+        self.slots.contains_key(&node)
+    }
+
+    /// Number of resident members of `group`.
+    pub fn group_resident(&self, group: u32) -> usize {
+        self.group_members.get(&group).map_or(0, Vec::len)
+    }
+
+    /// Marks `group` as used in `frame` (protects it from eviction during that frame).
+    pub fn touch_group(&mut self, group: u32, frame: u64) {
+        if let Some(u) = self.group_used.get_mut(&group) {
+            *u = frame;
+        }
+    }
+
+    /// Counters.
+    pub fn stats(&self) -> GpuCacheStats {
+        GpuCacheStats {
+            resident_patches: self.slots.len(),
+            ..self.stats
+        }
+    }
+
+    /// Uploads `patch` for `node` (member of `group`), evicting least recently used
+    /// groups not used in `frame` when there is no room. A node already resident is
+    /// left as is.
+    #[allow(clippy::too_many_arguments)]
+    pub fn upload(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        node: u32,
+        group: u32,
+        patch: &PatchData,
+        quant_step: f64,
+        frame: u64,
+    ) -> Result<u64, UploadError> {
+        if self.slots.contains_key(&node) {
+            return Ok(0);
+        }
+        let nv = u32::try_from(patch.positions.len()).map_err(|_| UploadError::TooBig)?;
+        let ni = u32::try_from(patch.indices.len()).map_err(|_| UploadError::TooBig)?;
+        if nv > self.max_vertices || ni > self.max_indices {
+            return Err(UploadError::TooBig);
+        }
+        let (vertices, indices) = loop {
+            match self.try_alloc(nv, ni) {
+                Some(r) => break r,
+                None => {
+                    if !self.grow(device, queue, nv, ni) && !self.evict_one(frame) {
+                        return Err(UploadError::Full);
+                    }
+                }
+            }
+        };
+        let mut verts = std::mem::take(&mut self.scratch);
+        gpu_vertices(patch, quant_step, &mut verts);
+        if !verts.is_empty() {
+            queue.write_buffer(
+                &self.vertex_buffer,
+                u64::from(vertices.start) * VERTEX_BYTES,
+                bytemuck::cast_slice(&verts),
+            );
+        }
+        self.scratch = verts;
+        if !patch.indices.is_empty() {
+            queue.write_buffer(
+                &self.index_buffer,
+                u64::from(indices.start) * INDEX_BYTES,
+                bytemuck::cast_slice(&patch.indices),
+            );
+        }
+        let slot = Slot {
+            vertices,
+            indices,
+            group,
+        };
+        let bytes = slot.bytes();
+        self.stats.resident_bytes += bytes;
+        self.stats.uploaded_bytes += bytes;
+        self.stats.uploads += 1;
+        self.slots.insert(node, slot);
+        self.group_members.entry(group).or_default().push(node);
+        self.group_used.entry(group).or_insert(frame);
+        Ok(bytes)
+    }
+
+    fn try_alloc(&mut self, nv: u32, ni: u32) -> Option<(Range<u32>, Range<u32>)> {
+        // Empty ranges are legal for empty patches and cost nothing.
+        let v = if nv == 0 {
+            0..0
+        } else {
+            self.vertex_alloc.allocate_range(nv).ok()?
+        };
+        let i = if ni == 0 {
+            0..0
+        } else {
+            match self.index_alloc.allocate_range(ni) {
+                Ok(r) => r,
+                Err(_) => {
+                    if nv != 0 {
+                        self.vertex_alloc.free_range(v);
+                    }
+                    return None;
+                }
+            }
+        };
+        Some((v, i))
+    }
+
+    /// Evicts the least recently used group not used in `frame`; false if none.
+    fn evict_one(&mut self, frame: u64) -> bool {
+        let victim = self
+            .group_used
+            .iter()
+            .filter(|&(_, &used)| used < frame)
+            .min_by_key(|&(&g, &used)| (used, g))
+            .map(|(&g, _)| g);
+        match victim {
+            Some(g) => {
+                self.evict_group(g);
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// Removes every resident member of `group`.
+    pub fn evict_group(&mut self, group: u32) {
+        self.group_used.remove(&group);
+        for node in self.group_members.remove(&group).unwrap_or_default() {
+            if let Some(slot) = self.slots.remove(&node) {
+                self.stats.resident_bytes -= slot.bytes();
+                self.stats.evictions += 1;
+                if !slot.vertices.is_empty() {
+                    self.vertex_alloc.free_range(slot.vertices);
+                }
+                if !slot.indices.is_empty() {
+                    self.index_alloc.free_range(slot.indices);
+                }
+            }
+        }
+    }
+
+    /// Evicts every group not used in `frame` (full-resolution streaming).
+    pub fn evict_unused(&mut self, frame: u64) {
+        let old: Vec<u32> = self
+            .group_used
+            .iter()
+            .filter(|&(_, &u)| u < frame)
+            .map(|(&g, _)| g)
+            .collect();
+        for g in old {
+            self.evict_group(g);
+        }
+    }
+}
+
+/// GPU bytes `p` takes once uploaded.
+pub fn patch_gpu_bytes(p: &PatchData) -> u64 {
+    p.positions.len() as u64 * VERTEX_BYTES + p.indices.len() as u64 * INDEX_BYTES
+}

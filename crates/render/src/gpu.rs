@@ -1,0 +1,81 @@
+//! Device setup: one wgpu instance, adapter, device and queue, made once.
+
+use crate::RenderError;
+
+/// A wgpu device and queue with what was learnt about the adapter.
+pub struct Gpu {
+    pub instance: wgpu::Instance,
+    pub adapter: wgpu::Adapter,
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    /// "name (backend, device type)", for logs and stats files.
+    pub adapter_label: String,
+}
+
+impl Gpu {
+    /// A device without a window. The backend comes from `WGPU_BACKEND` when set (e.g.
+    /// `gl` for llvmpipe), else wgpu's default order, which on a machine without a GPU
+    /// finds lavapipe (Mesa's CPU Vulkan). `WGPU_ADAPTER_NAME` picks an adapter by name.
+    pub fn headless() -> Result<Gpu, RenderError> {
+        // Without WGPU_BACKEND, try the primary backends first and GL only if they find
+        // nothing: probing EGL on a machine without it logs a scary (harmless) error.
+        if std::env::var_os("WGPU_BACKEND").is_some() {
+            let instance = wgpu::Instance::new(
+                wgpu::InstanceDescriptor::new_without_display_handle_from_env(),
+            );
+            return Self::with_instance(instance, None);
+        }
+        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+        desc.backends = wgpu::Backends::PRIMARY;
+        match Self::with_instance(wgpu::Instance::new(desc), None) {
+            Ok(gpu) => Ok(gpu),
+            Err(primary) => {
+                let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+                desc.backends = wgpu::Backends::GL;
+                Self::with_instance(wgpu::Instance::new(desc), None).map_err(|_| primary)
+            }
+        }
+    }
+
+    /// A device for `instance`, compatible with `surface` when given.
+    pub fn with_instance(
+        instance: wgpu::Instance,
+        surface: Option<&wgpu::Surface<'_>>,
+    ) -> Result<Gpu, RenderError> {
+        let adapter = pollster::block_on(wgpu::util::initialize_adapter_from_env_or_default(
+            &instance, surface,
+        ))
+        .map_err(|e| RenderError::NoAdapter(e.to_string()))?;
+        let info = adapter.get_info();
+        let adapter_label = format!("{} ({:?}, {:?})", info.name, info.backend, info.device_type);
+        // Ask for the adapter's buffer size limits: the GPU cache wants two big buffers.
+        let alimits = adapter.limits();
+        let limits = wgpu::Limits {
+            max_buffer_size: alimits.max_buffer_size,
+            ..wgpu::Limits::downlevel_defaults()
+        }
+        .using_resolution(alimits.clone());
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("tessera device"),
+            required_limits: limits,
+            ..Default::default()
+        }))
+        .map_err(|e| RenderError::Device(e.to_string()))?;
+        tracing::info!(adapter = %adapter_label, "gpu ready");
+        Ok(Gpu {
+            instance,
+            adapter,
+            device,
+            queue,
+            adapter_label,
+        })
+    }
+
+    /// Blocks until the GPU has finished all submitted work.
+    pub fn wait_idle(&self) -> Result<(), RenderError> {
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map(|_| ())
+            .map_err(|e| RenderError::Device(e.to_string()))
+    }
+}

@@ -1,0 +1,38 @@
+//! Tessera's renderer (issue 3): a wgpu GPU patch cache with a range allocator and LRU
+//! eviction by residency group, a simple lit patch pipeline, offscreen targets with
+//! readback, and a [`Viewer`] that runs selection + paging + upload + draw per frame.
+//!
+//! Data flow per progressive frame: `tessera_select::select_resident` over what the GPU
+//! holds → missing groups to the `tessera_page::Pager` (visible first, then the prefetch
+//! set) → finished groups uploaded into the [`GpuCache`] → one render pass.
+
+pub mod cache;
+pub mod gpu;
+pub mod groups;
+pub mod image;
+pub mod path;
+pub mod renderer;
+pub mod viewer;
+
+pub use cache::{GpuCache, GpuCacheStats, GpuVertex};
+pub use gpu::Gpu;
+pub use groups::Groups;
+pub use image::{diff_stats, enclosed_background_pixels, psnr, Image};
+pub use path::{CameraPath, PathError};
+pub use renderer::{FrameParams, Renderer, PATCH_SHADER};
+pub use viewer::{FrameStats, Mode, Viewer, ViewerOptions};
+
+/// Errors of the renderer.
+#[derive(Debug, thiserror::Error)]
+pub enum RenderError {
+    #[error("no usable GPU adapter (install Mesa's lavapipe: mesa-vulkan-drivers): {0}")]
+    NoAdapter(String),
+    #[error("GPU device error: {0}")]
+    Device(String),
+    #[error("nothing has been rendered yet")]
+    NoFrame,
+    #[error("the GPU cache is too small for a single patch; raise --gpu-budget")]
+    CacheTooSmall,
+    #[error("{0}")]
+    Io(String),
+}

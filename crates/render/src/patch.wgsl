@@ -1,0 +1,53 @@
+// Tessera patch shader: one draw per patch from the shared vertex/index buffers of the
+// GPU cache. Positions are in the model's local frame (model coordinates minus the
+// cube origin, so f32 keeps the quantisation grid exact); the camera matrices are built
+// in the same frame on the CPU in f64 and rounded once.
+//
+// Lighting: a head light (a directional light from just above and left of the eye) plus
+// a hemispheric ambient term, on the per-vertex colour (or a neutral clay colour when
+// the model has none). Kept simple on purpose: it must look the same on lavapipe and a
+// real GPU, and be cheap.
+
+struct Frame {
+    view_proj: mat4x4<f32>,
+    // xyz: unit direction TOWARD the light, view-independent (local frame); w unused.
+    light_dir: vec4<f32>,
+    // xyz: up direction of the camera for the hemispheric ambient; w: 1 when the model
+    // has per-vertex colours, 0 to use the clay colour.
+    sky_up_has_color: vec4<f32>,
+    clay: vec4<f32>,
+}
+
+@group(0) @binding(0) var<uniform> frame: Frame;
+
+struct VertexIn {
+    @location(0) position: vec3<f32>,
+    @location(1) normal: vec4<f32>,
+    @location(2) color: vec4<f32>,
+}
+
+struct VertexOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) normal: vec3<f32>,
+    @location(1) color: vec3<f32>,
+}
+
+@vertex
+fn vs_main(v: VertexIn) -> VertexOut {
+    var out: VertexOut;
+    out.clip = frame.view_proj * vec4<f32>(v.position, 1.0);
+    out.normal = v.normal.xyz;
+    out.color = select(frame.clay.rgb, v.color.rgb, frame.sky_up_has_color.w > 0.5);
+    return out;
+}
+
+@fragment
+fn fs_main(f: VertexOut) -> @location(0) vec4<f32> {
+    let len = length(f.normal);
+    let n = select(vec3<f32>(0.0, 0.0, 0.0), f.normal / len, len > 1e-6);
+    let diffuse = max(dot(n, frame.light_dir.xyz), 0.0);
+    let hemi = 0.5 + 0.5 * dot(n, frame.sky_up_has_color.xyz);
+    let ambient = mix(0.12, 0.28, hemi);
+    let lit = f.color * (ambient + 0.75 * diffuse);
+    return vec4<f32>(clamp(lit, vec3<f32>(0.0), vec3<f32>(1.0)), 1.0);
+}

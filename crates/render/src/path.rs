@@ -1,0 +1,239 @@
+//! Camera paths for `tessera render` (format in `docs/camera.md`): keyframes in the
+//! shared camera format, interpolated over a number of frames; or an orbit around the
+//! model's bounding sphere.
+
+use std::path::{Path, PathBuf};
+
+use glam::DVec3;
+use serde_json::Value;
+use tessera_select::{Camera, CameraError, Orbit};
+
+/// Fields of a path document.
+pub const PATH_FIELDS: [&str; 3] = ["frames", "loop", "keyframes"];
+
+/// A camera path that could not be read, with the file and the field to blame.
+#[derive(Debug, thiserror::Error)]
+pub enum PathError {
+    #[error("{file}: cannot read: {error}")]
+    Io {
+        file: PathBuf,
+        error: std::io::Error,
+    },
+    #[error("{file}: not valid JSON: {error}")]
+    Json {
+        file: PathBuf,
+        error: serde_json::Error,
+    },
+    #[error("{file}: field `{field}`: {message}")]
+    Field {
+        file: PathBuf,
+        field: String,
+        message: String,
+    },
+    #[error("{0}")]
+    Camera(CameraError),
+}
+
+/// Keyframes and a frame count; see [`CameraPath::cameras`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct CameraPath {
+    pub keyframes: Vec<Camera>,
+    /// Frames rendered along the whole path (at least 1).
+    pub frames: u32,
+    /// Go back from the last keyframe to the first (closed loops, turntables).
+    pub closed: bool,
+}
+
+impl CameraPath {
+    /// Reads a path file. `width`/`height` are the image size (keyframes may omit them;
+    /// when present they must be valid but the image size wins).
+    pub fn from_file(file: &Path, width: u32, height: u32) -> Result<CameraPath, PathError> {
+        let text = std::fs::read_to_string(file).map_err(|error| PathError::Io {
+            file: file.to_owned(),
+            error,
+        })?;
+        Self::from_json_str(&text, file, width, height)
+    }
+
+    /// Parses a path document; `file` names it in errors.
+    pub fn from_json_str(
+        text: &str,
+        file: &Path,
+        width: u32,
+        height: u32,
+    ) -> Result<CameraPath, PathError> {
+        let value: Value = serde_json::from_str(text).map_err(|error| PathError::Json {
+            file: file.to_owned(),
+            error,
+        })?;
+        let field = |field: &str, message: String| PathError::Field {
+            file: file.to_owned(),
+            field: field.to_owned(),
+            message,
+        };
+        let obj = value.as_object().ok_or_else(|| {
+            field(
+                "(top level)",
+                "expected an object with `frames` and `keyframes`".into(),
+            )
+        })?;
+        if let Some(k) = obj.keys().find(|k| !PATH_FIELDS.contains(&k.as_str())) {
+            return Err(field(
+                k,
+                "unknown field (a path has frames, loop, keyframes)".into(),
+            ));
+        }
+        let frames = match obj.get("frames") {
+            None => {
+                return Err(field(
+                    "frames",
+                    "missing (number of frames to render)".into(),
+                ))
+            }
+            Some(v) => match v.as_u64() {
+                Some(n) if (1..=1_000_000).contains(&n) => n as u32,
+                _ => {
+                    return Err(field(
+                        "frames",
+                        format!("expected an integer from 1 to 1000000, got {v}"),
+                    ))
+                }
+            },
+        };
+        let closed = match obj.get("loop") {
+            None => false,
+            Some(Value::Bool(b)) => *b,
+            Some(v) => return Err(field("loop", format!("expected true or false, got {v}"))),
+        };
+        let list = match obj.get("keyframes") {
+            None => return Err(field("keyframes", "missing (a list of cameras)".into())),
+            Some(Value::Array(a)) if !a.is_empty() => a,
+            Some(v) => {
+                return Err(field(
+                    "keyframes",
+                    format!("expected a non-empty array of cameras, got {v}"),
+                ))
+            }
+        };
+        let mut keyframes = Vec::with_capacity(list.len());
+        for (i, k) in list.iter().enumerate() {
+            let mut k = k.clone();
+            if let Some(o) = k.as_object_mut() {
+                o.entry("width").or_insert(Value::from(width));
+                o.entry("height").or_insert(Value::from(height));
+            }
+            let mut cam = Camera::from_json_value(&k).map_err(|e| {
+                PathError::Camera(
+                    e.with_field_prefix(&format!("keyframes[{i}]"))
+                        .with_origin(file),
+                )
+            })?;
+            cam.width = width;
+            cam.height = height;
+            keyframes.push(cam);
+        }
+        Ok(CameraPath {
+            keyframes,
+            frames,
+            closed,
+        })
+    }
+
+    /// An orbit of `frames` frames around a bounding sphere: the whole sphere in view
+    /// (distance so it fills ~80% of the height), 20 degrees above the equator, around
+    /// +Y.
+    pub fn orbit(bounds: [f64; 4], frames: u32, width: u32, height: u32) -> CameraPath {
+        let fov = 45.0f64;
+        let r = bounds[3].max(1e-9);
+        let dist = r / (0.8 * (fov.to_radians() / 2.0).tan()).max(1e-6) / 1.0;
+        let dist = dist.max(r * 1.05);
+        let n = frames.max(1);
+        let keyframes = (0..n)
+            .map(|i| {
+                let o = Orbit {
+                    center: [bounds[0], bounds[1], bounds[2]],
+                    radius: dist,
+                    azimuth_deg: 360.0 * f64::from(i) / f64::from(n),
+                    elevation_deg: 20.0,
+                    up: [0.0, 1.0, 0.0],
+                    fov_y_deg: fov,
+                    width,
+                    height,
+                };
+                // Valid by construction: positive radius, elevation below 90 degrees.
+                Camera::orbit(&o).expect("orbit camera")
+            })
+            .collect();
+        CameraPath {
+            keyframes,
+            frames: n,
+            closed: false,
+        }
+    }
+
+    /// The camera of every frame. Frames are spread evenly over the keyframe segments
+    /// (the first frame is the first keyframe; the last is the last keyframe, or for a
+    /// closed path the frame before returning to the first); position and target are
+    /// interpolated linearly, `up` linearly then renormalised, the field of view
+    /// linearly. A path with as many frames as keyframes renders the keyframes as is.
+    pub fn cameras(&self) -> Vec<Camera> {
+        let k = self.keyframes.len();
+        let n = self.frames.max(1) as usize;
+        if k == 1 {
+            return vec![self.keyframes[0].clone(); n];
+        }
+        if n == k && !self.closed {
+            return self.keyframes.clone();
+        }
+        let segments = if self.closed { k } else { k - 1 };
+        (0..n)
+            .map(|i| {
+                let t = if self.closed {
+                    i as f64 / n as f64 * segments as f64
+                } else if n == 1 {
+                    0.0
+                } else {
+                    i as f64 / (n - 1) as f64 * segments as f64
+                };
+                let s = (t.floor() as usize).min(segments - 1);
+                let f = t - s as f64;
+                let a = &self.keyframes[s];
+                let b = &self.keyframes[(s + 1) % k];
+                lerp_camera(a, b, f)
+            })
+            .collect()
+    }
+}
+
+fn lerp_camera(a: &Camera, b: &Camera, f: f64) -> Camera {
+    let l = |x: [f64; 3], y: [f64; 3]| DVec3::from(x).lerp(DVec3::from(y), f);
+    let position = l(a.position, b.position);
+    let mut target = l(a.target, b.target);
+    if (target - position).length() == 0.0 {
+        target = DVec3::from(a.target);
+    }
+    let up = l(a.up, b.up);
+    let up = if up.length() > 0.0 {
+        up
+    } else {
+        DVec3::from(a.up)
+    };
+    let fov = a.fov_y_deg + (b.fov_y_deg - a.fov_y_deg) * f;
+    let candidate = Camera {
+        position: position.to_array(),
+        target: target.to_array(),
+        up: up.to_array(),
+        fov_y_deg: fov,
+        width: a.width,
+        height: a.height,
+    };
+    // A degenerate in-between (up parallel to the view direction) falls back to the
+    // nearer keyframe.
+    if candidate.validate().is_ok() {
+        candidate
+    } else if f < 0.5 {
+        a.clone()
+    } else {
+        b.clone()
+    }
+}

@@ -1,0 +1,388 @@
+//! The draw side: pipeline and uniforms (set up once), offscreen targets (remade only
+//! when the size changes), and a per-frame pass that draws a list of cached patches.
+//! [`Renderer::encode_pass`] takes any colour view of [`Renderer::color_format`], so a
+//! window surface's texture is drawn the same way as the offscreen target.
+
+use glam::{DVec3, Mat4};
+use tessera_select::Camera;
+
+use crate::cache::{GpuCache, GpuVertex, Slot};
+use crate::image::Image;
+use crate::RenderError;
+
+/// The WGSL source of the patch shader (validated by a test with naga, no GPU needed).
+pub const PATCH_SHADER: &str = include_str!("patch.wgsl");
+
+/// Depth format of every target.
+pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+struct FrameUniform {
+    view_proj: [[f32; 4]; 4],
+    light_dir: [f32; 4],
+    sky_up_has_color: [f32; 4],
+    clay: [f32; 4],
+}
+
+/// Per-frame constants derived from the camera.
+#[derive(Clone, Copy, Debug)]
+pub struct FrameParams {
+    pub view_proj: Mat4,
+    /// Unit direction toward the light, local frame.
+    pub light_dir: [f32; 3],
+    /// Camera up, local frame.
+    pub sky_up: [f32; 3],
+}
+
+impl FrameParams {
+    /// Matrices for `camera` in the local frame of a model with `cube_origin`, with near
+    /// and far planes fitted around `bounds` (the model's bounding sphere, model
+    /// coordinates).
+    pub fn new(camera: &Camera, cube_origin: [f64; 3], bounds: [f64; 4]) -> FrameParams {
+        let eye = DVec3::from(camera.position);
+        let center = DVec3::new(bounds[0], bounds[1], bounds[2]);
+        let r = bounds[3].max(1e-9);
+        let d = (center - eye).length();
+        // Far just past the sphere; near as far forward as the sphere allows, but not
+        // below far/1e5 (depth precision) nor closer than when the eye is inside.
+        let far = (d + r) * 1.01;
+        let near = (d - r).max(far * 1e-5);
+        let view = camera.view_matrix_local(cube_origin);
+        let proj = camera.projection_matrix(near as f32, far as f32);
+        let b = camera.basis();
+        // Head light from above-left of the eye, so silhouettes still shade.
+        let to_light = (-b.forward + b.up * 0.45 - b.right * 0.3).normalize();
+        FrameParams {
+            view_proj: proj * view,
+            light_dir: to_light.as_vec3().to_array(),
+            sky_up: b.up.as_vec3().to_array(),
+        }
+    }
+}
+
+/// Pipeline, uniforms and offscreen targets.
+pub struct Renderer {
+    pipeline: wgpu::RenderPipeline,
+    uniform: wgpu::Buffer,
+    bind_group: wgpu::BindGroup,
+    color_format: wgpu::TextureFormat,
+    targets: Option<Targets>,
+    /// Clear colour (linear RGBA).
+    pub background: [f64; 4],
+    /// Whether vertex colours are used (else a clay colour).
+    pub has_colors: bool,
+}
+
+struct Targets {
+    width: u32,
+    height: u32,
+    color: wgpu::Texture,
+    color_view: wgpu::TextureView,
+    depth_view: wgpu::TextureView,
+    readback: wgpu::Buffer,
+    padded_row: u32,
+}
+
+impl Renderer {
+    /// Builds the pipeline for colour targets of `color_format`.
+    pub fn new(device: &wgpu::Device, color_format: wgpu::TextureFormat) -> Renderer {
+        let shader = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("tessera patch shader"),
+            source: wgpu::ShaderSource::Wgsl(PATCH_SHADER.into()),
+        });
+        let bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("tessera frame uniforms layout"),
+            entries: &[wgpu::BindGroupLayoutEntry {
+                binding: 0,
+                visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset: false,
+                    min_binding_size: wgpu::BufferSize::new(
+                        std::mem::size_of::<FrameUniform>() as u64
+                    ),
+                },
+                count: None,
+            }],
+        });
+        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("tessera patch pipeline layout"),
+            bind_group_layouts: &[Some(&bgl)],
+            immediate_size: 0,
+        });
+        let vertex_layout = wgpu::VertexBufferLayout {
+            array_stride: std::mem::size_of::<GpuVertex>() as u64,
+            step_mode: wgpu::VertexStepMode::Vertex,
+            attributes: &wgpu::vertex_attr_array![
+                0 => Float32x3,
+                1 => Snorm16x4,
+                2 => Unorm8x4
+            ],
+        };
+        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("tessera patch pipeline"),
+            layout: Some(&layout),
+            vertex: wgpu::VertexState {
+                module: &shader,
+                entry_point: Some("vs_main"),
+                compilation_options: Default::default(),
+                buffers: &[Some(vertex_layout)],
+            },
+            primitive: wgpu::PrimitiveState {
+                topology: wgpu::PrimitiveTopology::TriangleList,
+                front_face: wgpu::FrontFace::Ccw,
+                cull_mode: Some(wgpu::Face::Back),
+                ..Default::default()
+            },
+            depth_stencil: Some(wgpu::DepthStencilState {
+                format: DEPTH_FORMAT,
+                depth_write_enabled: Some(true),
+                depth_compare: Some(wgpu::CompareFunction::Less),
+                stencil: Default::default(),
+                bias: Default::default(),
+            }),
+            multisample: Default::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &shader,
+                entry_point: Some("fs_main"),
+                compilation_options: Default::default(),
+                targets: &[Some(wgpu::ColorTargetState {
+                    format: color_format,
+                    blend: None,
+                    write_mask: wgpu::ColorWrites::ALL,
+                })],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+        let uniform = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("tessera frame uniforms"),
+            size: std::mem::size_of::<FrameUniform>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("tessera frame uniforms bind group"),
+            layout: &bgl,
+            entries: &[wgpu::BindGroupEntry {
+                binding: 0,
+                resource: uniform.as_entire_binding(),
+            }],
+        });
+        Renderer {
+            pipeline,
+            uniform,
+            bind_group,
+            color_format,
+            targets: None,
+            background: [0.06, 0.07, 0.09, 1.0],
+            has_colors: false,
+        }
+    }
+
+    /// Colour format of the targets this renderer draws into.
+    pub fn color_format(&self) -> wgpu::TextureFormat {
+        self.color_format
+    }
+
+    /// Makes sure the offscreen targets are `width` x `height`.
+    pub fn ensure_offscreen(&mut self, device: &wgpu::Device, width: u32, height: u32) {
+        if let Some(t) = &self.targets {
+            if t.width == width && t.height == height {
+                return;
+            }
+        }
+        let size = wgpu::Extent3d {
+            width,
+            height,
+            depth_or_array_layers: 1,
+        };
+        let color = device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("tessera offscreen colour"),
+            size,
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: self.color_format,
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+            view_formats: &[],
+        });
+        let color_view = color.create_view(&wgpu::TextureViewDescriptor {
+            label: Some("tessera offscreen colour view"),
+            ..Default::default()
+        });
+        let depth_view = create_depth(device, width, height);
+        let padded_row = (width * 4).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT)
+            * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
+        let readback = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("tessera offscreen readback"),
+            size: u64::from(padded_row) * u64::from(height),
+            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+            mapped_at_creation: false,
+        });
+        self.targets = Some(Targets {
+            width,
+            height,
+            color,
+            color_view,
+            depth_view,
+            readback,
+            padded_row,
+        });
+    }
+
+    /// Writes the frame uniforms (call before encoding the frame's passes).
+    pub fn set_frame(&self, queue: &wgpu::Queue, p: &FrameParams) {
+        let u = FrameUniform {
+            view_proj: p.view_proj.to_cols_array_2d(),
+            light_dir: [p.light_dir[0], p.light_dir[1], p.light_dir[2], 0.0],
+            sky_up_has_color: [
+                p.sky_up[0],
+                p.sky_up[1],
+                p.sky_up[2],
+                if self.has_colors { 1.0 } else { 0.0 },
+            ],
+            clay: [0.78, 0.74, 0.68, 1.0],
+        };
+        queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&u));
+    }
+
+    /// Encodes one pass drawing `slots` from `cache` into `color`/`depth`; clears both
+    /// first when `clear`, else keeps them (a frame drawn in several passes).
+    pub fn encode_pass<'a>(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        color: &wgpu::TextureView,
+        depth: &wgpu::TextureView,
+        cache: &GpuCache,
+        slots: impl Iterator<Item = &'a Slot>,
+        clear: bool,
+    ) {
+        let [r, g, b, a] = self.background;
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("tessera patches pass"),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: color,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: if clear {
+                        wgpu::LoadOp::Clear(wgpu::Color { r, g, b, a })
+                    } else {
+                        wgpu::LoadOp::Load
+                    },
+                    store: wgpu::StoreOp::Store,
+                },
+            })],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: depth,
+                depth_ops: Some(wgpu::Operations {
+                    load: if clear {
+                        wgpu::LoadOp::Clear(1.0)
+                    } else {
+                        wgpu::LoadOp::Load
+                    },
+                    store: wgpu::StoreOp::Store,
+                }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, &self.bind_group, &[]);
+        pass.set_vertex_buffer(0, cache.vertex_buffer.slice(..));
+        pass.set_index_buffer(cache.index_buffer.slice(..), wgpu::IndexFormat::Uint32);
+        for s in slots {
+            if s.indices.is_empty() {
+                continue;
+            }
+            pass.draw_indexed(s.indices.clone(), s.vertices.start as i32, 0..1);
+        }
+    }
+
+    /// The offscreen colour and depth views (after [`Renderer::ensure_offscreen`]).
+    pub fn offscreen_views(&self) -> Option<(&wgpu::TextureView, &wgpu::TextureView)> {
+        self.targets
+            .as_ref()
+            .map(|t| (&t.color_view, &t.depth_view))
+    }
+
+    /// Copies the offscreen colour target to the CPU (waits for the GPU).
+    pub fn read_offscreen(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+    ) -> Result<Image, RenderError> {
+        let t = self.targets.as_ref().ok_or(RenderError::NoFrame)?;
+        let mut enc = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("tessera readback encoder"),
+        });
+        enc.copy_texture_to_buffer(
+            wgpu::TexelCopyTextureInfo {
+                texture: &t.color,
+                mip_level: 0,
+                origin: wgpu::Origin3d::ZERO,
+                aspect: wgpu::TextureAspect::All,
+            },
+            wgpu::TexelCopyBufferInfo {
+                buffer: &t.readback,
+                layout: wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(t.padded_row),
+                    rows_per_image: Some(t.height),
+                },
+            },
+            wgpu::Extent3d {
+                width: t.width,
+                height: t.height,
+                depth_or_array_layers: 1,
+            },
+        );
+        queue.submit([enc.finish()]);
+        let slice = t.readback.slice(..);
+        slice.map_async(wgpu::MapMode::Read, |_| {});
+        device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| RenderError::Device(e.to_string()))?;
+        let mut rgba = Vec::with_capacity((t.width * t.height * 4) as usize);
+        {
+            let data = slice
+                .get_mapped_range()
+                .map_err(|e| RenderError::Device(format!("{e:?}")))?;
+            for row in data.chunks(t.padded_row as usize).take(t.height as usize) {
+                rgba.extend_from_slice(&row[..(t.width * 4) as usize]);
+            }
+        }
+        t.readback.unmap();
+        Ok(Image {
+            width: t.width,
+            height: t.height,
+            rgba,
+        })
+    }
+}
+
+/// A depth target for `width` x `height` (also for window surfaces).
+pub fn create_depth(device: &wgpu::Device, width: u32, height: u32) -> wgpu::TextureView {
+    let depth = device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("tessera depth"),
+        size: wgpu::Extent3d {
+            width,
+            height,
+            depth_or_array_layers: 1,
+        },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: DEPTH_FORMAT,
+        usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
+        view_formats: &[],
+    });
+    depth.create_view(&wgpu::TextureViewDescriptor {
+        label: Some("tessera depth view"),
+        ..Default::default()
+    })
+}
