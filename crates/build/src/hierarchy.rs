@@ -487,6 +487,7 @@ fn finalize(
     let mut max_error = 0.0f32;
     let mut levels = 0u32;
     let mut root_balls = Vec::new();
+    let mut leaf_balls = Vec::new();
     for (_, n) in &infos {
         let (r, l, p) = n.id;
         let child = |c: u64| {
@@ -519,6 +520,11 @@ fn finalize(
         if l == 0 {
             root_balls.push(n.sat);
         }
+        if n.leaf {
+            // Leaves hold the full-resolution input: their tight balls give a tight
+            // model sphere (the roots' saturated balls are nested, so much looser).
+            leaf_balls.push(n.tight);
+        }
         report.stored_triangles += n.triangle_count as u64;
         report.leaves += n.leaf as u64;
         records.push(rec);
@@ -527,7 +533,14 @@ fn finalize(
                 .ok_or_else(|| ctx.internal_err("node without an encoded patch"))?,
         );
     }
-    let bs = Sphere::of_balls(&root_balls);
+    let bs = if leaf_balls.is_empty() {
+        Sphere::of_balls(&root_balls)
+    } else {
+        // Plus the quantisation error, so it holds the input vertices too.
+        let mut s = Sphere::of_balls(&leaf_balls);
+        s.radius += grid.size / (grid.bits as f64).exp2() * 0.5 * 3f64.sqrt();
+        s
+    };
     let header = Header {
         attributes: ctx.attributes,
         quant_bits: grid.bits,

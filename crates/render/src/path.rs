@@ -237,3 +237,95 @@ fn lerp_camera(a: &Camera, b: &Camera, f: f64) -> Camera {
         b.clone()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<CameraPath, PathError> {
+        CameraPath::from_json_str(text, Path::new("p.json"), 640, 480)
+    }
+
+    const KEY: &str = r#"{"position":[0,0,5],"target":[0,0,0],"up":[0,1,0],"fov_y_deg":45}"#;
+
+    #[test]
+    fn interpolates_keyframes() {
+        let text = format!(
+            r#"{{"frames": 5, "keyframes": [{KEY}, {{"position":[0,0,9],"target":[0,0,0],"up":[0,1,0],"fov_y_deg":65}}]}}"#
+        );
+        let p = parse(&text).unwrap();
+        let c = p.cameras();
+        assert_eq!(c.len(), 5);
+        assert_eq!(c[0].position, [0.0, 0.0, 5.0]);
+        assert_eq!(c[2].position, [0.0, 0.0, 7.0]);
+        assert_eq!(c[4].position, [0.0, 0.0, 9.0]);
+        assert_eq!(c[2].fov_y_deg, 55.0);
+        assert!(c.iter().all(|c| c.width == 640 && c.height == 480));
+        let closed = parse(&text.replace("\"frames\": 5", "\"frames\": 4, \"loop\": true"))
+            .unwrap()
+            .cameras();
+        let z: Vec<f64> = closed.iter().map(|c| c.position[2]).collect();
+        assert_eq!(z, [5.0, 7.0, 9.0, 7.0]);
+    }
+
+    #[test]
+    fn errors_name_the_field() {
+        let cases = [
+            (r#"{"keyframes": []}"#.to_owned(), "`frames`"),
+            (r#"{"frames": 3}"#.to_owned(), "`keyframes`"),
+            (
+                format!(r#"{{"frames": 0, "keyframes": [{KEY}]}}"#),
+                "`frames`",
+            ),
+            (
+                format!(r#"{{"frames": 2, "keyframes": [{KEY}], "fps": 3}}"#),
+                "`fps`",
+            ),
+            (
+                format!(r#"{{"frames": 2, "loop": 1, "keyframes": [{KEY}]}}"#),
+                "`loop`",
+            ),
+            (
+                format!(
+                    r#"{{"frames": 2, "keyframes": [{KEY}, {}]}}"#,
+                    KEY.replace("45", "\"45\"")
+                ),
+                "`keyframes[1].fov_y_deg`",
+            ),
+            (
+                format!(
+                    r#"{{"frames": 2, "keyframes": [{}]}}"#,
+                    KEY.replace("\"up\":[0,1,0],", "")
+                ),
+                "`keyframes[0].up`",
+            ),
+            ("[1,2]".to_owned(), "(top level)"),
+        ];
+        for (text, field) in cases {
+            let e = parse(&text).expect_err(&text).to_string();
+            assert!(
+                e.contains(field) && e.starts_with("p.json"),
+                "{text} -> {e}"
+            );
+        }
+        let e = parse("{").unwrap_err().to_string();
+        assert!(e.contains("not valid JSON"), "{e}");
+    }
+
+    #[test]
+    fn orbit_circles_the_sphere() {
+        let p = CameraPath::orbit([1.0, 2.0, 3.0, 2.0], 8, 320, 200);
+        let c = p.cameras();
+        assert_eq!(c.len(), 8);
+        for cam in &c {
+            let d = (DVec3::from(cam.position) - DVec3::new(1.0, 2.0, 3.0)).length();
+            assert!(
+                d > 2.0
+                    && (d - (DVec3::from(c[0].position) - DVec3::new(1.0, 2.0, 3.0)).length())
+                        .abs()
+                        < 1e-9
+            );
+            assert_eq!(cam.target, [1.0, 2.0, 3.0]);
+        }
+    }
+}

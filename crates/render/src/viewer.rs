@@ -432,7 +432,9 @@ impl Viewer {
                 .iter()
                 .map(|(_, p)| crate::cache::patch_gpu_bytes(p))
                 .sum();
-            if !all || size > budget {
+            // The budget may be exceeded by the first group of a frame, so a group
+            // larger than the budget still loads.
+            if !all || (size > budget && stats.patches_uploaded > 0) {
                 pin.extend(patches.iter().map(|(m, _)| *m));
                 continue;
             }
@@ -463,7 +465,7 @@ impl Viewer {
         }
         // Prefetch: lower priorities than anything visible.
         for &(n, pri) in &self.prefetch {
-            if !self.cache.contains(n) {
+            if !self.cache.contains(n) && !self.pager.is_resident(n) {
                 wanted.push((n, pri.min(1e5)));
             }
         }
@@ -471,7 +473,8 @@ impl Viewer {
         let advise: Vec<u32> = self.prefetch.iter().map(|&(n, _)| n).collect();
         self.pager.advise(&advise);
         self.pager.pin(&pin);
-        stats.pending_loads = wanted.len();
+        // Asked for and not yet read (the pager drops what is resident or in flight).
+        stats.pending_loads = self.pager.stats().pending;
 
         if stats.patches_uploaded > 0 {
             let ts = Instant::now();
