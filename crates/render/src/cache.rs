@@ -110,7 +110,7 @@ pub struct GpuCache {
     slots: FxHashMap<u32, Slot>,
     /// Resident members per group.
     group_members: FxHashMap<u32, Vec<u32>>,
-    /// Frame in which each group was last used.
+    /// Frame in which each group was last used; `u64::MAX` for pinned groups.
     group_used: FxHashMap<u32, u64>,
     stats: GpuCacheStats,
     scratch: Vec<GpuVertex>,
@@ -244,7 +244,16 @@ impl GpuCache {
     /// Marks `group` as used in `frame` (protects it from eviction during that frame).
     pub fn touch_group(&mut self, group: u32, frame: u64) {
         if let Some(u) = self.group_used.get_mut(&group) {
-            *u = frame;
+            if *u != u64::MAX {
+                *u = frame;
+            }
+        }
+    }
+
+    /// Never evicts `group` (its resident members) from now on.
+    pub fn pin_group(&mut self, group: u32) {
+        if let Some(u) = self.group_used.get_mut(&group) {
+            *u = u64::MAX;
         }
     }
 
@@ -256,9 +265,11 @@ impl GpuCache {
         }
     }
 
-    /// Uploads `patch` for `node` (member of `group`), evicting least recently used
-    /// groups not used in `frame` when there is no room. A node already resident is
-    /// left as is.
+    /// Uploads `patch` for `node` (member of `group`), evicting groups not used in
+    /// `frame` when there is no room: first the least recently used of those for which
+    /// `prefer_evict` holds (the viewer passes the hysteresis test
+    /// `tessera_select::should_unload`, so groups a slightly closer view would need stay),
+    /// then the least recently used of the rest. A node already resident is left as is.
     #[allow(clippy::too_many_arguments)]
     pub fn upload(
         &mut self,
@@ -269,6 +280,7 @@ impl GpuCache {
         patch: &PatchData,
         quant_step: f64,
         frame: u64,
+        prefer_evict: &dyn Fn(u32) -> bool,
     ) -> Result<u64, UploadError> {
         if self.slots.contains_key(&node) {
             return Ok(0);
@@ -282,7 +294,7 @@ impl GpuCache {
             match self.try_alloc(nv, ni) {
                 Some(r) => break r,
                 None => {
-                    if !self.grow(device, queue, nv, ni) && !self.evict_one(frame) {
+                    if !self.grow(device, queue, nv, ni) && !self.evict_one(frame, prefer_evict) {
                         return Err(UploadError::Full);
                     }
                 }
@@ -343,15 +355,17 @@ impl GpuCache {
         Some((v, i))
     }
 
-    /// Evicts the least recently used group not used in `frame`; false if none.
-    fn evict_one(&mut self, frame: u64) -> bool {
-        let victim = self
-            .group_used
-            .iter()
-            .filter(|&(_, &used)| used < frame)
-            .min_by_key(|&(&g, &used)| (used, g))
-            .map(|(&g, _)| g);
-        match victim {
+    /// Evicts the least recently used group not used in `frame`, preferring those
+    /// `prefer` accepts; false if none.
+    fn evict_one(&mut self, frame: u64, prefer: &dyn Fn(u32) -> bool) -> bool {
+        let pick = |preferred_only: bool| {
+            self.group_used
+                .iter()
+                .filter(|&(&g, &used)| used < frame && (!preferred_only || prefer(g)))
+                .min_by_key(|&(&g, &used)| (used, g))
+                .map(|(&g, _)| g)
+        };
+        match pick(true).or_else(|| pick(false)) {
             Some(g) => {
                 self.evict_group(g);
                 true

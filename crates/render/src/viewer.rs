@@ -20,8 +20,8 @@ use serde::Serialize;
 use tessera_format::{Model, PatchData, ATTR_COLORS, NO_NODE};
 use tessera_page::{Event, Pager, PagerOptions};
 use tessera_select::{
-    predict_camera, prefetch_set, select_resident, Camera, NodeView, PrefetchOptions, Selection,
-    ViewParams,
+    predict_camera, prefetch_set, select_resident, should_unload, Camera, NodeView,
+    PrefetchOptions, Selection, ViewParams,
 };
 
 use crate::cache::{GpuCache, UploadError};
@@ -30,6 +30,11 @@ use crate::groups::{Groups, Readiness};
 use crate::image::Image;
 use crate::renderer::{FrameParams, Renderer};
 use crate::RenderError;
+
+/// Sphere growth of the prefetch set.
+const PREFETCH_GROWTH: f32 = 1.5;
+/// Sphere growth of the unload test (more than the prefetch growth: hysteresis).
+const UNLOAD_GROWTH: f32 = 2.0;
 
 /// How frames are produced; see the module docs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
@@ -108,6 +113,8 @@ pub struct FrameStats {
     /// Render passes (more than one when a cut did not fit the GPU cache).
     pub passes: u32,
     pub gpu_resident_bytes: u64,
+    /// Patches evicted from the GPU cache so far.
+    pub gpu_evictions: u64,
     pub ram_resident_bytes: u64,
 }
 
@@ -210,10 +217,13 @@ impl Viewer {
                         &p,
                         self.quant_step,
                         self.epoch,
+                        &|_| true,
                     )
                     .map_err(|e| format!("{e:?}"))
             }) {
-                Ok(_) => {}
+                // Roots stay resident for the viewer's lifetime: they are the fallback
+                // for everything else.
+                Ok(_) => self.cache.pin_group(g),
                 Err(error) => {
                     tracing::warn!(node = n, %error, "root patch skipped");
                     self.failed.insert(n);
@@ -262,6 +272,7 @@ impl Viewer {
         stats.failed_patches = self.failed.len();
         let cs = self.cache.stats();
         stats.gpu_resident_bytes = cs.resident_bytes;
+        stats.gpu_evictions = cs.evictions;
         stats.ram_resident_bytes = self.pager.stats().resident_bytes;
         stats.selected_nodes = self.sel.draw.len();
         let nodes = self.model.nodes();
@@ -324,22 +335,21 @@ impl Viewer {
 
     /// Marks the groups of the drawn nodes and of all their ancestors as used now.
     fn touch_draw_set(&mut self) {
+        // The groups of the drawn nodes and everything they depend on (which includes
+        // the groups of all their ancestors): evicting any of them would make a drawn
+        // group unusable.
         self.epoch += 1;
         let stamp = self.epoch;
-        let hot = self.nv.nodes();
+        let mut stack: Vec<u32> = Vec::new();
         for &n in &self.sel.draw {
-            let mut cur = n;
-            loop {
-                let g = self.groups.of(cur);
+            stack.push(self.groups.of(n));
+            while let Some(g) = stack.pop() {
                 if self.visit[g as usize] == stamp {
-                    break;
+                    continue;
                 }
                 self.visit[g as usize] = stamp;
                 self.cache.touch_group(g, stamp);
-                cur = hot[cur as usize].parent;
-                if cur == NO_NODE {
-                    break;
-                }
+                stack.extend_from_slice(self.groups.dependencies(g));
             }
         }
     }
@@ -393,7 +403,7 @@ impl Viewer {
                 predict_camera(prev, camera, dt, dt * 4.0)
             });
             let popts = PrefetchOptions {
-                sphere_growth: 1.5,
+                sphere_growth: PREFETCH_GROWTH,
                 predicted,
             };
             prefetch_set(&self.nv, &view, &popts, &mut self.prefetch);
@@ -409,6 +419,15 @@ impl Viewer {
         let mut wanted: Vec<(u32, f32)> = Vec::new();
         let mut pin: Vec<u32> = Vec::new();
         let mut budget = self.opts.upload_budget_bytes;
+        // Hysteresis: evict first what even a view with spheres grown by 2 (more than the
+        // prefetch growth) would not need.
+        let (nv, groups) = (&self.nv, &self.groups);
+        let unloadable = |g: u32| {
+            groups
+                .members(g)
+                .iter()
+                .all(|&m| should_unload(nv, m, &view, UNLOAD_GROWTH))
+        };
         for &(g, pri) in &needed {
             if self.group_failed(g) {
                 continue;
@@ -447,6 +466,7 @@ impl Viewer {
                     p,
                     self.quant_step,
                     stamp,
+                    &unloadable,
                 ) {
                     Ok(b) => {
                         budget -= b.min(budget);
@@ -584,6 +604,7 @@ impl Viewer {
                                 &p,
                                 self.quant_step,
                                 stamp,
+                                &|_| true,
                             ) {
                                 Ok(b) => {
                                     stats.bytes_uploaded += b;
@@ -610,6 +631,10 @@ impl Viewer {
                 if !full_now {
                     next += batch.len();
                 }
+                // Flush the staged writes of this batch now: wgpu keeps a staging copy of
+                // every write until the next submit, which would double the memory of a
+                // cut streamed through the cache.
+                self.gpu.queue.submit([]);
             }
             // One pass over what is on the GPU and not drawn yet.
             let (color, depth) = self

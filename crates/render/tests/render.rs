@@ -148,6 +148,41 @@ fn no_pinholes_while_streaming() {
     );
 }
 
+/// A GPU cache far smaller than the model: groups are evicted and re-uploaded as the
+/// orbit turns, the cache stays within its budget, and cuts stay crack-free.
+#[test]
+fn tiny_gpu_cache_evicts_whole_groups_without_cracks() {
+    let b = build(None, 60_000, &small_options());
+    let bounds = b.model.header().bounding_sphere;
+    let budget = 2u64 << 20;
+    let mut v = Viewer::new(
+        b.model.clone(),
+        ViewerOptions {
+            tolerance_px: 0.3,
+            background: MAGENTA,
+            gpu_budget_bytes: budget,
+            ..Default::default()
+        },
+    )
+    .expect("viewer");
+    let cams = outside_cameras(bounds, 320, 240, 60);
+    let mut last = None;
+    for (i, cam) in cams.iter().enumerate() {
+        let s = v.render(cam).expect("render");
+        assert!(s.gpu_resident_bytes <= budget, "frame {i}: {s:?}");
+        let img = v.read_image().expect("read");
+        let holes = enclosed_background_pixels(&img, [255, 0, 255]);
+        assert_eq!(holes, 0, "frame {i}: {holes} pinhole pixels ({s:?})");
+        std::thread::sleep(Duration::from_millis(3));
+        last = Some(s);
+    }
+    let last = last.expect("frames");
+    assert!(
+        last.gpu_evictions > 0,
+        "the cache should have evicted: {last:?}"
+    );
+}
+
 #[test]
 fn pinhole_detector_sees_a_hole() {
     // Negative control of the check above: a lit disc with one background pixel inside.
