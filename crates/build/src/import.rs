@@ -134,7 +134,7 @@ impl MeshVisitor for Sink<'_> {
             .write_all(bytemuck::bytes_of(&idx))
             .map_err(|e| MeshError::Visitor(format!("{}: {e}", self.paths.1.display())))?;
         self.face_count += 1;
-        if self.face_count % (1 << 20) == 0 {
+        if self.face_count.is_multiple_of(1 << 20) {
             self.progress.advance(1 << 20);
             if self.progress.cancelled() {
                 return Err(MeshError::Visitor("interrupted".into()));

@@ -136,7 +136,11 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     let mean = |f: &dyn Fn(&FrameStats) -> f64| all.iter().map(f).sum::<f64>() / n;
     let mut sorted: Vec<f64> = all.iter().map(|s| s.frame_ms).collect();
     sorted.sort_by(f64::total_cmp);
-    let median_ms = sorted.get(sorted.len() / 2).copied().unwrap_or(0.0);
+    let median_ms = match sorted.len() {
+        0 => 0.0,
+        n if n % 2 == 1 => sorted[n / 2],
+        n => 0.5 * (sorted[n / 2 - 1] + sorted[n / 2]),
+    };
     let summary = json!({
         "frames": all.len(),
         "mode": mode,

@@ -49,6 +49,7 @@ fn main() -> ExitCode {
     unsafe {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
+    quiet_mesa_runtime_dir();
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_env("TESSERA_LOG")
@@ -71,6 +72,29 @@ fn main() -> ExitCode {
         Err(e) => {
             eprintln!("error: {e:#}");
             ExitCode::FAILURE
+        }
+    }
+}
+
+/// Mesa's drivers print "error: XDG_RUNTIME_DIR is invalid or not set" (harmless, but it
+/// reads like a failure of ours) when the variable is missing, as on headless machines
+/// and in CI. Give them a private directory instead, before any thread or driver starts.
+fn quiet_mesa_runtime_dir() {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::{DirBuilderExt, MetadataExt};
+        if std::env::var_os("XDG_RUNTIME_DIR").is_some() {
+            return;
+        }
+        // SAFETY: getuid has no preconditions.
+        let uid = unsafe { libc::getuid() };
+        let dir = std::env::temp_dir().join(format!("tessera-runtime-{uid}"));
+        let _ = std::fs::DirBuilder::new().mode(0o700).create(&dir);
+        // Use it only if it is ours and private (what Mesa checks, too).
+        if let Ok(m) = std::fs::metadata(&dir) {
+            if m.is_dir() && m.uid() == uid && m.mode() & 0o077 == 0 {
+                std::env::set_var("XDG_RUNTIME_DIR", &dir);
+            }
         }
     }
 }
