@@ -445,3 +445,61 @@ fn bunny_golden_images() {
         "a 4 px cut passed as the 1 px golden image"
     );
 }
+
+/// Per-vertex colours reach the screen: the gargoyle scan (RGBA per vertex) renders with
+/// its own colours, not the clay colour used for models without any.
+#[test]
+fn vertex_colours_are_drawn() {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/gargo-color.ply");
+    assert!(
+        p.exists(),
+        "{} is missing (../shared/data beside the repository)",
+        p.display()
+    );
+    let b = build(Some(&p), 0, &BuildOptions::default());
+    assert_ne!(b.model.header().attributes & tessera_format::ATTR_COLORS, 0);
+    let bounds = b.model.header().bounding_sphere;
+    let cam = Camera::orbit(&Orbit {
+        center: [bounds[0], bounds[1], bounds[2]],
+        radius: bounds[3] * 2.2,
+        up: [0.0, 1.0, 0.0],
+        fov_y_deg: 45.0,
+        width: 240,
+        height: 240,
+        ..Default::default()
+    })
+    .expect("camera");
+    let mut v = Viewer::new(
+        b.model.clone(),
+        ViewerOptions {
+            mode: Mode::Complete,
+            background: MAGENTA,
+            ..Default::default()
+        },
+    )
+    .expect("viewer");
+    v.render(&cam).expect("render");
+    let img = v.read_image().expect("read");
+    // Hue of the lit pixels: the clay colour has r > g > b with fixed ratios; the scan's
+    // colours must produce pixels far from that ratio.
+    let clay = [0.78f32, 0.74, 0.68];
+    let mut lit = 0;
+    let mut off_clay = 0;
+    for px in img.rgba.chunks_exact(4) {
+        if px[..3] == [255, 0, 255] || px[0] < 40 {
+            continue;
+        }
+        lit += 1;
+        let k = f32::from(px[0]) / clay[0];
+        let dg = (f32::from(px[1]) - k * clay[1]).abs();
+        let db = (f32::from(px[2]) - k * clay[2]).abs();
+        if dg.max(db) > 12.0 {
+            off_clay += 1;
+        }
+    }
+    assert!(lit > 2000, "the model is barely visible ({lit} lit pixels)");
+    assert!(
+        off_clay * 4 > lit,
+        "only {off_clay} of {lit} lit pixels differ from the clay colour: colours not drawn?"
+    );
+}
