@@ -140,7 +140,7 @@ impl GpuCache {
     /// maximum buffer size), starting small and growing on demand.
     pub fn new(device: &wgpu::Device, budget_bytes: u64) -> GpuCache {
         let max = device.limits().max_buffer_size;
-        let half = (budget_bytes / 2).clamp(1 << 20, max);
+        let half = (budget_bytes / 2).clamp(256 << 10, max);
         let max_vertices = (half / VERTEX_BYTES).min(u64::from(u32::MAX)) as u32;
         let max_indices = (half / INDEX_BYTES).min(u64::from(u32::MAX)) as u32;
         let start = INITIAL_BUFFER_BYTES.min(half);

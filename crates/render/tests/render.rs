@@ -503,3 +503,42 @@ fn vertex_colours_are_drawn() {
         "only {off_clay} of {lit} lit pixels differ from the clay colour: colours not drawn?"
     );
 }
+
+/// A cut larger than the GPU cache is drawn in several passes (upload, draw, evict,
+/// repeat) and gives the same picture as one pass.
+#[test]
+fn multi_pass_frames_match_single_pass() {
+    let b = build(None, 60_000, &small_options());
+    let cam = &outside_cameras(b.model.header().bounding_sphere, 320, 240, 3)[1];
+    for mode in [Mode::FullResolution, Mode::Complete] {
+        let render = |budget: u64| {
+            let mut v = Viewer::new(
+                b.model.clone(),
+                ViewerOptions {
+                    mode,
+                    tolerance_px: 0.2,
+                    gpu_budget_bytes: budget,
+                    ..Default::default()
+                },
+            )
+            .expect("viewer");
+            let s = v.render(cam).expect("render");
+            (s, v.read_image().expect("read"))
+        };
+        let (one, a) = render(256 << 20);
+        let (many, b2) = render(512 << 10);
+        assert_eq!(one.passes, 1, "{mode:?}: {one:?}");
+        assert!(
+            many.passes > 1,
+            "{mode:?}: a 512 KiB cache should need several passes: {many:?}"
+        );
+        assert_eq!(one.triangles, many.triangles);
+        let (off, max) = diff_stats(&a, &b2, 0).expect("same size");
+        eprintln!("{mode:?}: {} passes, {off} pixels differ (max {max})", many.passes);
+        assert!(
+            off <= 8,
+            "{mode:?}: {off} pixels differ (max {max}) between 1 and {} passes",
+            many.passes
+        );
+    }
+}
