@@ -31,6 +31,9 @@ use crate::image::Image;
 use crate::renderer::{FrameParams, Renderer};
 use crate::RenderError;
 
+/// Select-upload rounds per progressive frame (each round's uploads make the next
+/// level wanted).
+const MAX_UPLOAD_ROUNDS: usize = 8;
 /// Sphere growth of the prefetch set.
 const PREFETCH_GROWTH: f32 = 1.5;
 /// Sphere growth of the unload test (more than the prefetch growth: hysteresis).
@@ -410,78 +413,102 @@ impl Viewer {
         } else {
             self.prefetch.clear();
         }
-        let needed = self.needed_groups();
         stats.selection_ms = ts.elapsed().as_secs_f64() * 1e3;
 
-        // Upload finished groups, most urgent first, within the byte budget.
-        self.touch_draw_set();
-        let stamp = self.epoch;
+        // Upload finished groups, most urgent first, within the byte budget; then select
+        // again, since uploaded groups make their children wanted, which the loader may
+        // already hold (prefetched). A few rounds per frame, never waiting.
+        let mut budget = self.opts.upload_budget_bytes;
         let mut wanted: Vec<(u32, f32)> = Vec::new();
         let mut pin: Vec<u32> = Vec::new();
-        let mut budget = self.opts.upload_budget_bytes;
-        // Hysteresis: evict first what even a view with spheres grown by 2 (more than the
-        // prefetch growth) would not need.
-        let (nv, groups) = (&self.nv, &self.groups);
-        let unloadable = |g: u32| {
-            groups
-                .members(g)
-                .iter()
-                .all(|&m| should_unload(nv, m, &view, UNLOAD_GROWTH))
-        };
-        for &(g, pri) in &needed {
-            if self.group_failed(g) {
-                continue;
+        let mut stale = false;
+        for round in 0..MAX_UPLOAD_ROUNDS {
+            let ts = Instant::now();
+            if round > 0 {
+                self.select_on_gpu(&view);
             }
-            let members = self.groups.members(g);
-            let mut patches: Vec<(u32, Arc<PatchData>)> = Vec::with_capacity(members.len());
-            let mut all = true;
-            for &m in members {
-                if self.cache.contains(m) {
+            self.touch_draw_set();
+            let needed = self.needed_groups();
+            stats.selection_ms += ts.elapsed().as_secs_f64() * 1e3;
+            let stamp = self.epoch;
+            wanted.clear();
+            pin.clear();
+            let uploads_before = stats.patches_uploaded;
+            // Hysteresis: evict first what even a view with spheres grown by 2 (more than
+            // the prefetch growth) would not need.
+            let (nv, groups) = (&self.nv, &self.groups);
+            let unloadable = |g: u32| {
+                groups
+                    .members(g)
+                    .iter()
+                    .all(|&m| should_unload(nv, m, &view, UNLOAD_GROWTH))
+            };
+            for &(g, pri) in &needed {
+                if self.group_failed(g) {
                     continue;
                 }
-                match self.pager.get(m) {
-                    Some(p) => patches.push((m, p)),
-                    None => {
-                        all = false;
-                        wanted.push((m, 1e6 + pri));
+                let members = self.groups.members(g);
+                let mut patches: Vec<(u32, Arc<PatchData>)> = Vec::with_capacity(members.len());
+                let mut all = true;
+                for &m in members {
+                    if self.cache.contains(m) {
+                        continue;
+                    }
+                    match self.pager.get(m) {
+                        Some(p) => patches.push((m, p)),
+                        None => {
+                            all = false;
+                            wanted.push((m, 1e6 + pri));
+                        }
                     }
                 }
-            }
-            let size: u64 = patches
-                .iter()
-                .map(|(_, p)| crate::cache::patch_gpu_bytes(p))
-                .sum();
-            // The budget may be exceeded by the first group of a frame, so a group
-            // larger than the budget still loads.
-            if !all || (size > budget && stats.patches_uploaded > 0) {
-                pin.extend(patches.iter().map(|(m, _)| *m));
-                continue;
-            }
-            for (m, p) in &patches {
-                match self.cache.upload(
-                    &self.gpu.device,
-                    &self.gpu.queue,
-                    *m,
-                    g,
-                    p,
-                    self.quant_step,
-                    stamp,
-                    &unloadable,
-                ) {
-                    Ok(b) => {
-                        budget -= b.min(budget);
-                        stats.bytes_uploaded += b;
-                        stats.patches_uploaded += 1;
-                    }
-                    Err(UploadError::Full) => break,
-                    Err(UploadError::TooBig) => {
-                        tracing::warn!(node = m, "patch larger than the GPU cache, skipped");
-                        self.failed.insert(*m);
+                let size: u64 = patches
+                    .iter()
+                    .map(|(_, p)| crate::cache::patch_gpu_bytes(p))
+                    .sum();
+                // The budget may be exceeded by the first group of a frame, so a group
+                // larger than the budget still loads.
+                if !all || (size > budget && stats.patches_uploaded > 0) {
+                    pin.extend(patches.iter().map(|(m, _)| *m));
+                    continue;
+                }
+                for (m, p) in &patches {
+                    match self.cache.upload(
+                        &self.gpu.device,
+                        &self.gpu.queue,
+                        *m,
+                        g,
+                        p,
+                        self.quant_step,
+                        stamp,
+                        &unloadable,
+                    ) {
+                        Ok(b) => {
+                            budget -= b.min(budget);
+                            stats.bytes_uploaded += b;
+                            stats.patches_uploaded += 1;
+                        }
+                        Err(UploadError::Full) => break,
+                        Err(UploadError::TooBig) => {
+                            tracing::warn!(node = m, "patch larger than the GPU cache, skipped");
+                            self.failed.insert(*m);
+                        }
                     }
                 }
+                // Keep the group from being evicted by later uploads of this frame.
+                self.cache.touch_group(g, stamp);
             }
-            // Keep the group from being evicted by later uploads of this frame.
-            self.cache.touch_group(g, stamp);
+            stale = stats.patches_uploaded > uploads_before;
+            if !stale {
+                break;
+            }
+        }
+        if stale {
+            // The last round uploaded: draw what it made usable.
+            let ts = Instant::now();
+            self.select_on_gpu(&view);
+            self.touch_draw_set();
+            stats.selection_ms += ts.elapsed().as_secs_f64() * 1e3;
         }
         // Prefetch: lower priorities than anything visible.
         for &(n, pri) in &self.prefetch {
@@ -495,13 +522,6 @@ impl Viewer {
         self.pager.pin(&pin);
         // Asked for and not yet read (the pager drops what is resident or in flight).
         stats.pending_loads = self.pager.stats().pending;
-
-        if stats.patches_uploaded > 0 {
-            let ts = Instant::now();
-            self.select_on_gpu(&view);
-            self.touch_draw_set();
-            stats.selection_ms += ts.elapsed().as_secs_f64() * 1e3;
-        }
         let before: FxHashSet<u32> = draw_before.into_iter().collect();
         stats.cache_hits = self.sel.draw.iter().filter(|n| before.contains(n)).count();
         self.draw_resident(true)?;

@@ -534,7 +534,10 @@ fn multi_pass_frames_match_single_pass() {
         );
         assert_eq!(one.triangles, many.triangles);
         let (off, max) = diff_stats(&a, &b2, 0).expect("same size");
-        eprintln!("{mode:?}: {} passes, {off} pixels differ (max {max})", many.passes);
+        eprintln!(
+            "{mode:?}: {} passes, {off} pixels differ (max {max})",
+            many.passes
+        );
         assert!(
             off <= 8,
             "{mode:?}: {off} pixels differ (max {max}) between 1 and {} passes",
