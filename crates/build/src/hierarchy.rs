@@ -10,7 +10,7 @@ use crate::bounds::Sphere;
 use crate::diamond::{self, SimplifyConfig};
 use crate::import::Imported;
 use crate::partition::{parent_id, read_leaf_faces, tet_id, Leaf, Partition, TetId};
-use crate::patch::{remove_bad_triangles, Welder, WorkPatch, WorkVertex};
+use crate::patch::{grid_to_local, remove_bad_triangles, Welder, WorkPatch, WorkVertex};
 use crate::{BuildError, BuildOptions, BuildReport, Progress};
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
@@ -58,6 +58,11 @@ struct Ctx<'a> {
     degenerate: AtomicU64,
     duplicate: AtomicU64,
     leaf_vertices_loaded: AtomicU64,
+    /// Largest squared distance (f64 bits; non-negative floats order like their bits)
+    /// of a leaf vertex from `box_center`: the model's bounding sphere.
+    leaf_far2: AtomicU64,
+    /// Centre of the input's bounding box, local frame.
+    box_center: [f64; 3],
     repaired: AtomicU64,
     attributes: u32,
     cfg: SimplifyConfig,
@@ -140,6 +145,12 @@ impl Ctx<'_> {
         {
             self.imp.vertices.release();
         }
+        let far2 = w
+            .vertices
+            .iter()
+            .map(|v| crate::bounds::dist2(grid_to_local(v.q, self.step), self.box_center))
+            .fold(0.0f64, f64::max);
+        self.leaf_far2.fetch_max(far2.to_bits(), Ordering::Relaxed);
         let c = remove_bad_triangles(&mut indices, &w.vertices);
         self.degenerate.fetch_add(c.degenerate, Ordering::Relaxed);
         self.duplicate.fetch_add(c.duplicate, Ordering::Relaxed);
@@ -405,6 +416,10 @@ pub(crate) fn build_hierarchy(
         degenerate: AtomicU64::new(0),
         duplicate: AtomicU64::new(0),
         leaf_vertices_loaded: AtomicU64::new(0),
+        leaf_far2: AtomicU64::new(0f64.to_bits()),
+        box_center: std::array::from_fn(|i| {
+            0.5 * (imp.bounds.min[i] + imp.bounds.max[i]) - part.grid.origin[i]
+        }),
         repaired: AtomicU64::new(0),
         attributes,
         cfg: SimplifyConfig {
@@ -536,9 +551,19 @@ fn finalize(
     let bs = if leaf_balls.is_empty() {
         Sphere::of_balls(&root_balls)
     } else {
-        // Plus the quantisation error, so it holds the input vertices too.
+        // Two valid spheres around the full-resolution geometry, the smaller wins: the
+        // ball of the leaves' balls, and the bounding box's centre with the farthest
+        // leaf vertex. Plus the quantisation error, so it holds the input vertices too.
+        let qerr = grid.size / (grid.bits as f64).exp2() * 0.5 * 3f64.sqrt();
         let mut s = Sphere::of_balls(&leaf_balls);
-        s.radius += grid.size / (grid.bits as f64).exp2() * 0.5 * 3f64.sqrt();
+        let far = f64::from_bits(ctx.leaf_far2.load(Ordering::Relaxed)).sqrt();
+        if far.is_finite() && far < s.radius {
+            s = Sphere {
+                center: ctx.box_center,
+                radius: far,
+            };
+        }
+        s.radius += qerr;
         s
     };
     let header = Header {
