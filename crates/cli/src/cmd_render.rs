@@ -118,7 +118,6 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     let cameras = path.cameras();
     let mut frames: Vec<serde_json::Value> = Vec::with_capacity(cameras.len());
     let mut all: Vec<FrameStats> = Vec::with_capacity(cameras.len());
-    let mut peak_rss = current_rss_bytes();
     for (i, cam) in cameras.iter().enumerate() {
         let s = viewer.render(cam)?;
         if let Some(dir) = &a.out {
@@ -126,12 +125,14 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
             img.save_png(&dir.join(format!("frame_{i:05}.png")))?;
         }
         let rss = current_rss_bytes();
-        peak_rss = peak_rss.max(rss);
         let mut v = serde_json::to_value(&s)?;
         v["rss_bytes"] = json!(rss);
         frames.push(v);
         all.push(s);
     }
+    // The kernel's high-water mark also sees peaks inside a frame, which the per-frame
+    // samples above miss.
+    let peak_rss = tessera_build::peak_rss_bytes().unwrap_or_else(current_rss_bytes);
     let n = all.len().max(1) as f64;
     let mean = |f: &dyn Fn(&FrameStats) -> f64| all.iter().map(f).sum::<f64>() / n;
     let mut sorted: Vec<f64> = all.iter().map(|s| s.frame_ms).collect();

@@ -100,13 +100,8 @@ pub struct GpuCacheStats {
 
 /// The GPU patch cache. See the module docs.
 pub struct GpuCache {
-    pub vertex_buffer: wgpu::Buffer,
-    pub index_buffer: wgpu::Buffer,
-    vertex_alloc: RangeAllocator<u32>,
-    index_alloc: RangeAllocator<u32>,
-    /// Largest capacities (vertices, indices) the budget allows.
-    max_vertices: u32,
-    max_indices: u32,
+    vertices: Pool,
+    indices: Pool,
     slots: FxHashMap<u32, Slot>,
     /// Resident members per group.
     group_members: FxHashMap<u32, Vec<u32>>,
@@ -121,18 +116,101 @@ pub struct GpuCache {
 /// zero-fills a buffer before its first use).
 const INITIAL_BUFFER_BYTES: u64 = 8 << 20;
 
-fn make_buffer(
-    device: &wgpu::Device,
-    label: &str,
-    bytes: u64,
+/// One growable GPU buffer carved into element ranges (vertices or indices).
+struct Pool {
+    buffer: wgpu::Buffer,
+    alloc: RangeAllocator<u32>,
+    /// Largest capacity, in elements, the budget allows.
+    max: u32,
+    elem_bytes: u64,
+    label: &'static str,
     usage: wgpu::BufferUsages,
-) -> wgpu::Buffer {
-    device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some(label),
-        size: bytes,
-        usage: usage | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
-        mapped_at_creation: false,
-    })
+}
+
+impl Pool {
+    /// A pool of at most `budget_bytes`, starting at [`INITIAL_BUFFER_BYTES`].
+    fn new(
+        device: &wgpu::Device,
+        label: &'static str,
+        usage: wgpu::BufferUsages,
+        elem_bytes: u64,
+        budget_bytes: u64,
+    ) -> Pool {
+        let max = (budget_bytes / elem_bytes).min(u64::from(u32::MAX)) as u32;
+        let start = ((INITIAL_BUFFER_BYTES.min(budget_bytes) / elem_bytes) as u32).min(max);
+        Pool {
+            buffer: Self::make_buffer(device, label, usage, u64::from(start) * elem_bytes),
+            alloc: RangeAllocator::new(0..start),
+            max,
+            elem_bytes,
+            label,
+            usage,
+        }
+    }
+
+    fn make_buffer(
+        device: &wgpu::Device,
+        label: &str,
+        usage: wgpu::BufferUsages,
+        bytes: u64,
+    ) -> wgpu::Buffer {
+        device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: bytes,
+            usage: usage | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        })
+    }
+
+    fn capacity(&self) -> u32 {
+        self.alloc.initial_range().end
+    }
+
+    fn can_grow(&self) -> bool {
+        self.capacity() < self.max
+    }
+
+    /// Too few free elements in total for `n`, and room to grow.
+    fn short_of(&self, n: u32) -> bool {
+        self.alloc.total_available() < n && self.can_grow()
+    }
+
+    /// A range of `n` elements; empty ranges are legal for empty patches and cost nothing.
+    fn allocate(&mut self, n: u32) -> Option<Range<u32>> {
+        if n == 0 {
+            Some(0..0)
+        } else {
+            self.alloc.allocate_range(n).ok()
+        }
+    }
+
+    fn free(&mut self, r: Range<u32>) {
+        if !r.is_empty() {
+            self.alloc.free_range(r);
+        }
+    }
+
+    /// Doubles the capacity (at least to `n`, at most to the maximum), copying the
+    /// contents with `enc`.
+    fn grow(&mut self, device: &wgpu::Device, enc: &mut wgpu::CommandEncoder, n: u32) {
+        let new_cap = self.capacity().saturating_mul(2).max(n).min(self.max);
+        let nb = Self::make_buffer(
+            device,
+            self.label,
+            self.usage,
+            u64::from(new_cap) * self.elem_bytes,
+        );
+        enc.copy_buffer_to_buffer(&self.buffer, 0, &nb, 0, self.buffer.size());
+        self.buffer = nb;
+        self.alloc.grow_to(new_cap);
+    }
+
+    /// Writes `data` at element `start` (nothing for empty data).
+    fn write(&self, queue: &wgpu::Queue, start: u32, data: &[u8]) {
+        if !data.is_empty() {
+            queue.write_buffer(&self.buffer, u64::from(start) * self.elem_bytes, data);
+        }
+    }
 }
 
 impl GpuCache {
@@ -141,28 +219,21 @@ impl GpuCache {
     pub fn new(device: &wgpu::Device, budget_bytes: u64) -> GpuCache {
         let max = device.limits().max_buffer_size;
         let half = (budget_bytes / 2).clamp(256 << 10, max);
-        let max_vertices = (half / VERTEX_BYTES).min(u64::from(u32::MAX)) as u32;
-        let max_indices = (half / INDEX_BYTES).min(u64::from(u32::MAX)) as u32;
-        let start = INITIAL_BUFFER_BYTES.min(half);
-        let vcount = ((start / VERTEX_BYTES) as u32).min(max_vertices);
-        let icount = ((start / INDEX_BYTES) as u32).min(max_indices);
         GpuCache {
-            vertex_buffer: make_buffer(
+            vertices: Pool::new(
                 device,
                 "tessera patch cache: vertices",
-                u64::from(vcount) * VERTEX_BYTES,
                 wgpu::BufferUsages::VERTEX,
+                VERTEX_BYTES,
+                half,
             ),
-            index_buffer: make_buffer(
+            indices: Pool::new(
                 device,
                 "tessera patch cache: indices",
-                u64::from(icount) * INDEX_BYTES,
                 wgpu::BufferUsages::INDEX,
+                INDEX_BYTES,
+                half,
             ),
-            vertex_alloc: RangeAllocator::new(0..vcount),
-            index_alloc: RangeAllocator::new(0..icount),
-            max_vertices,
-            max_indices,
             slots: FxHashMap::default(),
             group_members: FxHashMap::default(),
             group_used: FxHashMap::default(),
@@ -171,24 +242,29 @@ impl GpuCache {
         }
     }
 
-    /// GPU bytes of the two buffers (what the cache holds from the device).
-    pub fn capacity_bytes(&self) -> u64 {
-        self.vertex_buffer.size() + self.index_buffer.size()
+    /// The vertex buffer (bind it whole; slots address it with `base_vertex`).
+    pub fn vertex_buffer(&self) -> &wgpu::Buffer {
+        &self.vertices.buffer
     }
 
-    /// Doubles whichever buffer lacks room for `nv` vertices / `ni` indices (copying the
+    /// The index buffer (u32 indices; slots address it by index range).
+    pub fn index_buffer(&self) -> &wgpu::Buffer {
+        &self.indices.buffer
+    }
+
+    /// GPU bytes of the two buffers (what the cache holds from the device).
+    pub fn capacity_bytes(&self) -> u64 {
+        self.vertices.buffer.size() + self.indices.buffer.size()
+    }
+
+    /// Grows whichever buffer lacks room for `nv` vertices / `ni` indices (copying the
     /// contents on the GPU); false when both are at their maximum.
     fn grow(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, nv: u32, ni: u32) -> bool {
-        let vcap = self.vertex_alloc.initial_range().end;
-        let icap = self.index_alloc.initial_range().end;
-        let want_v = self.vertex_alloc.total_available() < nv && vcap < self.max_vertices;
-        let want_i = self.index_alloc.total_available() < ni && icap < self.max_indices;
-        // Fragmentation: room in total but no contiguous range; grow whichever can.
-        let (want_v, want_i) = if want_v || want_i {
-            (want_v, want_i)
-        } else {
-            (vcap < self.max_vertices, icap < self.max_indices)
-        };
+        let (mut want_v, mut want_i) = (self.vertices.short_of(nv), self.indices.short_of(ni));
+        if !want_v && !want_i {
+            // Fragmentation: room in total but no contiguous range; grow whichever can.
+            (want_v, want_i) = (self.vertices.can_grow(), self.indices.can_grow());
+        }
         if !want_v && !want_i {
             return false;
         }
@@ -196,28 +272,10 @@ impl GpuCache {
             label: Some("tessera patch cache growth"),
         });
         if want_v {
-            let new_cap = vcap.saturating_mul(2).max(nv).min(self.max_vertices);
-            let nb = make_buffer(
-                device,
-                "tessera patch cache: vertices",
-                u64::from(new_cap) * VERTEX_BYTES,
-                wgpu::BufferUsages::VERTEX,
-            );
-            enc.copy_buffer_to_buffer(&self.vertex_buffer, 0, &nb, 0, self.vertex_buffer.size());
-            self.vertex_buffer = nb;
-            self.vertex_alloc.grow_to(new_cap);
+            self.vertices.grow(device, &mut enc, nv);
         }
         if want_i {
-            let new_cap = icap.saturating_mul(2).max(ni).min(self.max_indices);
-            let nb = make_buffer(
-                device,
-                "tessera patch cache: indices",
-                u64::from(new_cap) * INDEX_BYTES,
-                wgpu::BufferUsages::INDEX,
-            );
-            enc.copy_buffer_to_buffer(&self.index_buffer, 0, &nb, 0, self.index_buffer.size());
-            self.index_buffer = nb;
-            self.index_alloc.grow_to(new_cap);
+            self.indices.grow(device, &mut enc, ni);
         }
         // Submitted now: writes staged before it land first, later ones after the copy.
         queue.submit([enc.finish()]);
@@ -287,7 +345,7 @@ impl GpuCache {
         }
         let nv = u32::try_from(patch.positions.len()).map_err(|_| UploadError::TooBig)?;
         let ni = u32::try_from(patch.indices.len()).map_err(|_| UploadError::TooBig)?;
-        if nv > self.max_vertices || ni > self.max_indices {
+        if nv > self.vertices.max || ni > self.indices.max {
             return Err(UploadError::TooBig);
         }
         let (vertices, indices) = loop {
@@ -302,21 +360,11 @@ impl GpuCache {
         };
         let mut verts = std::mem::take(&mut self.scratch);
         gpu_vertices(patch, quant_step, &mut verts);
-        if !verts.is_empty() {
-            queue.write_buffer(
-                &self.vertex_buffer,
-                u64::from(vertices.start) * VERTEX_BYTES,
-                bytemuck::cast_slice(&verts),
-            );
-        }
+        self.vertices
+            .write(queue, vertices.start, bytemuck::cast_slice(&verts));
         self.scratch = verts;
-        if !patch.indices.is_empty() {
-            queue.write_buffer(
-                &self.index_buffer,
-                u64::from(indices.start) * INDEX_BYTES,
-                bytemuck::cast_slice(&patch.indices),
-            );
-        }
+        self.indices
+            .write(queue, indices.start, bytemuck::cast_slice(&patch.indices));
         let slot = Slot {
             vertices,
             indices,
@@ -333,26 +381,14 @@ impl GpuCache {
     }
 
     fn try_alloc(&mut self, nv: u32, ni: u32) -> Option<(Range<u32>, Range<u32>)> {
-        // Empty ranges are legal for empty patches and cost nothing.
-        let v = if nv == 0 {
-            0..0
-        } else {
-            self.vertex_alloc.allocate_range(nv).ok()?
-        };
-        let i = if ni == 0 {
-            0..0
-        } else {
-            match self.index_alloc.allocate_range(ni) {
-                Ok(r) => r,
-                Err(_) => {
-                    if nv != 0 {
-                        self.vertex_alloc.free_range(v);
-                    }
-                    return None;
-                }
+        let v = self.vertices.allocate(nv)?;
+        match self.indices.allocate(ni) {
+            Some(i) => Some((v, i)),
+            None => {
+                self.vertices.free(v);
+                None
             }
-        };
-        Some((v, i))
+        }
     }
 
     /// Evicts the least recently used group not used in `frame`, preferring those
@@ -381,12 +417,8 @@ impl GpuCache {
             if let Some(slot) = self.slots.remove(&node) {
                 self.stats.resident_bytes -= slot.bytes();
                 self.stats.evictions += 1;
-                if !slot.vertices.is_empty() {
-                    self.vertex_alloc.free_range(slot.vertices);
-                }
-                if !slot.indices.is_empty() {
-                    self.index_alloc.free_range(slot.indices);
-                }
+                self.vertices.free(slot.vertices);
+                self.indices.free(slot.indices);
             }
         }
     }

@@ -293,8 +293,8 @@ impl Renderer {
         });
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &self.bind_group, &[]);
-        pass.set_vertex_buffer(0, cache.vertex_buffer.slice(..));
-        pass.set_index_buffer(cache.index_buffer.slice(..), wgpu::IndexFormat::Uint32);
+        pass.set_vertex_buffer(0, cache.vertex_buffer().slice(..));
+        pass.set_index_buffer(cache.index_buffer().slice(..), wgpu::IndexFormat::Uint32);
         for s in slots {
             if s.indices.is_empty() {
                 continue;

@@ -24,7 +24,7 @@ use tessera_select::{
     PrefetchOptions, Selection, ViewParams,
 };
 
-use crate::cache::{GpuCache, UploadError};
+use crate::cache::{GpuCache, Slot, UploadError};
 use crate::gpu::Gpu;
 use crate::groups::{Groups, Readiness};
 use crate::image::Image;
@@ -202,15 +202,11 @@ impl Viewer {
     /// it. A root that fails to load is skipped (a hole, reported).
     fn load_roots(&mut self) {
         let roots: Vec<u32> = (0..self.nv.root_count()).collect();
-        let model = &self.model;
-        let decoded: Vec<(u32, Result<PatchData, String>)> = roots
-            .par_iter()
-            .map(|&n| (n, model.decode_patch(n as usize).map_err(|e| e.to_string())))
-            .collect();
+        let decoded = self.decode_many(&roots);
         self.epoch += 1;
         for (n, r) in decoded {
             let g = self.groups.of(n);
-            match r.map_err(|e| e.to_string()).and_then(|p| {
+            match r.and_then(|p| {
                 self.cache
                     .upload(
                         &self.gpu.device,
@@ -233,6 +229,15 @@ impl Viewer {
                 }
             }
         }
+    }
+
+    /// Decodes `nodes` in parallel (CRC checked); errors as text.
+    fn decode_many(&self, nodes: &[u32]) -> Vec<(u32, Result<PatchData, String>)> {
+        let model = &self.model;
+        nodes
+            .par_iter()
+            .map(|&n| (n, model.decode_patch(n as usize).map_err(|e| e.to_string())))
+            .collect()
     }
 
     /// The device (e.g. to report the adapter).
@@ -386,10 +391,7 @@ impl Viewer {
     }
 
     fn group_failed(&self, g: u32) -> bool {
-        self.groups
-            .members(g)
-            .iter()
-            .any(|m| self.failed.contains(m))
+        group_has_failure(&self.groups, &self.failed, g)
     }
 
     fn progressive(&mut self, camera: &Camera) -> Result<FrameStats, RenderError> {
@@ -524,13 +526,21 @@ impl Viewer {
         stats.pending_loads = self.pager.stats().pending;
         let before: FxHashSet<u32> = draw_before.into_iter().collect();
         stats.cache_hits = self.sel.draw.iter().filter(|n| before.contains(n)).count();
-        self.draw_resident(true)?;
+        self.submit_pass(
+            self.sel.draw.iter().filter_map(|&n| self.cache.slot(n)),
+            true,
+        )?;
         stats.passes = 1;
         Ok(stats)
     }
 
-    /// Encodes and submits one pass over the drawn nodes that are on the GPU.
-    fn draw_resident(&mut self, clear: bool) -> Result<(), RenderError> {
+    /// Encodes and submits one render pass drawing `slots` into the offscreen target;
+    /// `clear` starts the frame, otherwise the pass adds to what is there.
+    fn submit_pass<'a>(
+        &'a self,
+        slots: impl Iterator<Item = &'a Slot>,
+        clear: bool,
+    ) -> Result<(), RenderError> {
         let (color, depth) = self
             .renderer
             .offscreen_views()
@@ -541,15 +551,8 @@ impl Viewer {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("tessera frame encoder"),
             });
-        let cache = &self.cache;
-        self.renderer.encode_pass(
-            &mut enc,
-            color,
-            depth,
-            cache,
-            self.sel.draw.iter().filter_map(|&n| cache.slot(n)),
-            clear,
-        );
+        self.renderer
+            .encode_pass(&mut enc, color, depth, &self.cache, slots, clear);
         self.gpu.queue.submit([enc.finish()]);
         Ok(())
     }
@@ -569,33 +572,23 @@ impl Viewer {
             );
         } else {
             let view = self.view_params(camera);
-            let failed = &self.failed;
-            let groups = &self.groups;
+            let (failed, groups) = (&self.failed, &self.groups);
             // Everything counts as resident except groups with a failed member.
-            let ok = |n: u32| {
-                !groups
-                    .members(groups.of(n))
-                    .iter()
-                    .any(|m| failed.contains(m))
-            };
+            let ok = |n: u32| !group_has_failure(groups, failed, groups.of(n));
             select_resident(&self.nv, &view, &ok, &mut self.sel);
         }
         stats.selection_ms = ts.elapsed().as_secs_f64() * 1e3;
 
         self.epoch += 1;
         let mut stamp = self.epoch;
-        for &n in &self.sel.draw {
-            if let Some(s) = self.cache.slot(n) {
-                let g = s.group;
-                self.cache.touch_group(g, stamp);
-            }
-        }
         let mut todo: Vec<u32> = Vec::new();
         for &n in &self.sel.draw {
-            if self.cache.contains(n) {
-                stats.cache_hits += 1;
-            } else {
-                todo.push(n);
+            match self.cache.slot(n).map(|s| s.group) {
+                Some(g) => {
+                    self.cache.touch_group(g, stamp);
+                    stats.cache_hits += 1;
+                }
+                None => todo.push(n),
             }
         }
         stats.cache_misses = todo.len();
@@ -607,11 +600,7 @@ impl Viewer {
             let mut full_now = false;
             while next < todo.len() && !full_now {
                 let batch = &todo[next..(next + 64).min(todo.len())];
-                let model = &self.model;
-                let decoded: Vec<(u32, Result<PatchData, String>)> = batch
-                    .par_iter()
-                    .map(|&n| (n, model.decode_patch(n as usize).map_err(|e| e.to_string())))
-                    .collect();
+                let decoded = self.decode_many(batch);
                 for (i, (n, r)) in decoded.into_iter().enumerate() {
                     match r {
                         Ok(p) => {
@@ -657,16 +646,6 @@ impl Viewer {
                 self.gpu.queue.submit([]);
             }
             // One pass over what is on the GPU and not drawn yet.
-            let (color, depth) = self
-                .renderer
-                .offscreen_views()
-                .ok_or(RenderError::NoFrame)?;
-            let mut enc = self
-                .gpu
-                .device
-                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                    label: Some("tessera frame encoder"),
-                });
             let cache = &self.cache;
             let mut slots = Vec::new();
             for (i, &n) in self.sel.draw.iter().enumerate() {
@@ -684,9 +663,7 @@ impl Viewer {
                 // Nothing fits even in an empty cache.
                 return Err(RenderError::CacheTooSmall);
             }
-            self.renderer
-                .encode_pass(&mut enc, color, depth, cache, slots.into_iter(), !cleared);
-            self.gpu.queue.submit([enc.finish()]);
+            self.submit_pass(slots.into_iter(), !cleared)?;
             cleared = true;
             stats.passes += 1;
             if next >= todo.len() {
@@ -704,4 +681,9 @@ impl Viewer {
         }
         Ok(stats)
     }
+}
+
+/// Whether a member of group `g` failed to load (such a group can never be complete).
+fn group_has_failure(groups: &Groups, failed: &FxHashSet<u32>, g: u32) -> bool {
+    groups.members(g).iter().any(|m| failed.contains(m))
 }
