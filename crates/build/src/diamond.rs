@@ -6,7 +6,7 @@
 
 use crate::bounds::Sphere;
 use crate::patch::{Welder, WorkPatch, WorkVertex};
-use rustc_hash::{FxHashMap, FxHashSet};
+use rustc_hash::FxHashMap;
 
 /// Tuning of the simplifier.
 #[derive(Clone, Copy, Debug)]
@@ -52,33 +52,46 @@ pub fn merge(children: &[&WorkPatch]) -> Merged {
     }
 }
 
-/// Vertices that must not move: every vertex on an edge used by exactly one triangle (or
-/// by three or more) of the merged mesh, with vertices welded by position alone so that
-/// attribute seams do not count as borders. Those edges are the diamond's outer border
-/// (shared with patches of other diamonds) and the model's own open boundary.
-pub fn border_locks(vertices: &[WorkVertex], indices: &[u32]) -> Vec<bool> {
+/// One id per distinct grid position: vertices that differ only in attributes (a normal
+/// or colour seam) share it. Border detection and repair weld by it, so attribute seams
+/// are not mistaken for borders.
+pub fn position_ids(vertices: &[WorkVertex]) -> Vec<u32> {
     let mut pos_id: FxHashMap<[u32; 3], u32> =
         FxHashMap::with_capacity_and_hasher(vertices.len(), Default::default());
-    let pid: Vec<u32> = vertices
+    vertices
         .iter()
         .map(|v| {
             let n = pos_id.len() as u32;
             *pos_id.entry(v.q).or_insert(n)
         })
-        .collect();
-    let mut edges: FxHashMap<(u32, u32), u32> =
+        .collect()
+}
+
+/// An undirected edge between two position ids, as one hash key.
+fn edge_key(a: u32, b: u32) -> u64 {
+    ((a.min(b) as u64) << 32) | a.max(b) as u64
+}
+
+/// Vertices that must not move: every vertex on an edge used by exactly one triangle (or
+/// by three or more) of the merged mesh, with vertices welded by position alone
+/// ([`position_ids`]) so that attribute seams do not count as borders. Those edges are
+/// the diamond's outer border (shared with patches of other diamonds) and the model's own
+/// open boundary.
+pub fn border_locks(pid: &[u32], indices: &[u32]) -> Vec<bool> {
+    let mut edges: FxHashMap<u64, u32> =
         FxHashMap::with_capacity_and_hasher(indices.len(), Default::default());
     for t in indices.chunks_exact(3) {
         for k in 0..3 {
             let (a, b) = (pid[t[k] as usize], pid[t[(k + 1) % 3] as usize]);
-            *edges.entry((a.min(b), a.max(b))).or_default() += 1;
+            *edges.entry(edge_key(a, b)).or_default() += 1;
         }
     }
-    let mut locked_pos = vec![false; pos_id.len()];
-    for (&(a, b), &n) in &edges {
+    let positions = pid.iter().map(|&p| p as usize + 1).max().unwrap_or(0);
+    let mut locked_pos = vec![false; positions];
+    for (&e, &n) in &edges {
         if n != 2 {
-            locked_pos[a as usize] = true;
-            locked_pos[b as usize] = true;
+            locked_pos[(e >> 32) as usize] = true;
+            locked_pos[(e & 0xffff_ffff) as usize] = true;
         }
     }
     pid.iter().map(|&p| locked_pos[p as usize]).collect()
@@ -186,68 +199,68 @@ fn cross_q(a: [u32; 3], b: [u32; 3], c: [u32; 3]) -> [i64; 3] {
 ///
 /// Positions decide (vertices welded by grid point), so attribute seams do not hide a
 /// defect. Only interior edges change; the locked border stays as it was.
-pub fn repair(vertices: &[WorkVertex], indices: &mut Vec<u32>) -> RepairCounts {
+pub fn repair(vertices: &[WorkVertex], pid: &[u32], indices: &mut Vec<u32>) -> RepairCounts {
     let mut counts = RepairCounts::default();
     let q = |i: u32| vertices[i as usize].q;
-    // Folded pairs.
-    let mut by_set: FxHashMap<[[u32; 3]; 3], Vec<usize>> = FxHashMap::default();
+    let p = |i: u32| pid[i as usize];
+    // Folded pairs: triangles on the same three points, keyed by their sorted position
+    // ids; per key the first two triangles and how many there are.
+    let mut by_set: FxHashMap<[u32; 3], (u32, u32, u32)> =
+        FxHashMap::with_capacity_and_hasher(indices.len() / 3, Default::default());
     for (t, tri) in indices.chunks_exact(3).enumerate() {
-        let mut k = [q(tri[0]), q(tri[1]), q(tri[2])];
-        k.sort();
-        by_set.entry(k).or_default().push(t);
+        let mut k = [p(tri[0]), p(tri[1]), p(tri[2])];
+        k.sort_unstable();
+        let e = by_set.entry(k).or_insert((t as u32, u32::MAX, 0));
+        if e.2 == 1 {
+            e.1 = t as u32;
+        }
+        e.2 += 1;
     }
     let mut drop = vec![false; indices.len() / 3];
-    let rotation = |t: usize| {
-        let p = [
-            q(indices[3 * t]),
-            q(indices[3 * t + 1]),
-            q(indices[3 * t + 2]),
+    // Canonical rotation (smallest position id first): the same for two triangles on the
+    // same points exactly when they have the same orientation.
+    let rotation = |t: u32| {
+        let t = t as usize;
+        let x = [
+            p(indices[3 * t]),
+            p(indices[3 * t + 1]),
+            p(indices[3 * t + 2]),
         ];
-        let r = (0..3).min_by_key(|&k| p[k]).unwrap_or(0);
-        [p[r], p[(r + 1) % 3], p[(r + 2) % 3]]
+        let r = (0..3).min_by_key(|&k| x[k]).unwrap_or(0);
+        [x[r], x[(r + 1) % 3], x[(r + 2) % 3]]
     };
-    for ts in by_set.values() {
-        // Same three points, opposite orientation (different canonical rotations).
-        if ts.len() == 2 && rotation(ts[0]) != rotation(ts[1]) {
-            drop[ts[0]] = true;
-            drop[ts[1]] = true;
+    for &(t0, t1, n) in by_set.values() {
+        if n == 2 && rotation(t0) != rotation(t1) {
+            drop[t0 as usize] = true;
+            drop[t1 as usize] = true;
             counts.folded_pairs_removed += 1;
         }
     }
-    if counts.folded_pairs_removed > 0 {
-        let mut kept = Vec::with_capacity(indices.len());
-        for (t, tri) in indices.chunks_exact(3).enumerate() {
-            if !drop[t] {
-                kept.extend_from_slice(tri);
-            }
-        }
-        *indices = kept;
-    }
-    // Ears: directed edge -> triangle.
-    let mut edge: FxHashMap<(u32, u32), usize> =
+    drop_marked(indices, &drop, counts.folded_pairs_removed > 0);
+    // Ears: directed edge (vertex indices) -> triangle.
+    let directed = |a: u32, b: u32| ((a as u64) << 32) | b as u64;
+    let mut edge: FxHashMap<u64, usize> =
         FxHashMap::with_capacity_and_hasher(indices.len(), Default::default());
     for (t, tri) in indices.chunks_exact(3).enumerate() {
         for k in 0..3 {
-            edge.insert((tri[k], tri[(k + 1) % 3]), t);
+            edge.insert(directed(tri[k], tri[(k + 1) % 3]), t);
         }
     }
     // Border edges: used once, vertices welded by position.
-    let mut uses: FxHashMap<([u32; 3], [u32; 3]), u32> =
+    let mut uses: FxHashMap<u64, u32> =
         FxHashMap::with_capacity_and_hasher(indices.len(), Default::default());
-    let undirected = |a: [u32; 3], b: [u32; 3]| (a.min(b), a.max(b));
     for tri in indices.chunks_exact(3) {
         for k in 0..3 {
-            *uses
-                .entry(undirected(q(tri[k]), q(tri[(k + 1) % 3])))
-                .or_default() += 1;
+            *uses.entry(edge_key(p(tri[k]), p(tri[(k + 1) % 3]))).or_default() += 1;
         }
     }
-    let border = |a: u32, b: u32| uses.get(&undirected(q(a), q(b))) == Some(&1);
-    let mut on_border: FxHashSet<[u32; 3]> = FxHashSet::default();
-    for (&(a, b), &n) in &uses {
+    let border = |a: u32, b: u32| uses.get(&edge_key(p(a), p(b))) == Some(&1);
+    let positions = pid.iter().map(|&x| x as usize + 1).max().unwrap_or(0);
+    let mut on_border = vec![false; positions];
+    for (&e, &n) in &uses {
         if n == 1 {
-            on_border.insert(a);
-            on_border.insert(b);
+            on_border[(e >> 32) as usize] = true;
+            on_border[(e & 0xffff_ffff) as usize] = true;
         }
     }
     let dist2 = |a: [u32; 3], b: [u32; 3]| {
@@ -260,15 +273,16 @@ pub fn repair(vertices: &[WorkVertex], indices: &mut Vec<u32>) -> RepairCounts {
     };
     for t in 0..indices.len() / 3 {
         let tri = [indices[3 * t], indices[3 * t + 1], indices[3 * t + 2]];
-        let p = tri.map(q);
-        if p[0] == p[1] || p[1] == p[2] || p[0] == p[2] {
+        let ids = tri.map(p);
+        if ids[0] == ids[1] || ids[1] == ids[2] || ids[0] == ids[2] {
             continue;
         }
+        let pts = tri.map(q);
         // Rotate to (A, C, B), directed edge B -> A to be flipped: for a zero-area
         // triangle the longest edge, for a border ear the one edge not on the border.
-        let r = if cross_q(p[0], p[1], p[2]) == [0; 3] {
+        let r = if cross_q(pts[0], pts[1], pts[2]) == [0; 3] {
             (0..3)
-                .max_by_key(|&k| dist2(p[(k + 2) % 3], p[k]))
+                .max_by_key(|&k| dist2(pts[(k + 2) % 3], pts[k]))
                 .unwrap_or(0)
         } else {
             match (0..3).find(|&k| {
@@ -281,7 +295,7 @@ pub fn repair(vertices: &[WorkVertex], indices: &mut Vec<u32>) -> RepairCounts {
             }
         };
         let (a, c, b) = (tri[r], tri[(r + 1) % 3], tri[(r + 2) % 3]);
-        let Some(&t2) = edge.get(&(a, b)) else {
+        let Some(&t2) = edge.get(&directed(a, b)) else {
             continue;
         };
         let tri2 = [indices[3 * t2], indices[3 * t2 + 1], indices[3 * t2 + 2]];
@@ -304,9 +318,9 @@ pub fn repair(vertices: &[WorkVertex], indices: &mut Vec<u32>) -> RepairCounts {
             < 0.0;
         if d == c
             || n2 == [0; 3]
-            || (on_border.contains(&q(d)) && !folded)
-            || edge.contains_key(&(c, d))
-            || edge.contains_key(&(d, c))
+            || (on_border[p(d) as usize] && !folded)
+            || edge.contains_key(&directed(c, d))
+            || edge.contains_key(&directed(d, c))
         {
             continue;
         }
@@ -314,7 +328,7 @@ pub fn repair(vertices: &[WorkVertex], indices: &mut Vec<u32>) -> RepairCounts {
             continue;
         }
         for (x, y) in [(a, c), (c, b), (b, a), (a, b), (b, d), (d, a)] {
-            edge.remove(&(x, y));
+            edge.remove(&directed(x, y));
         }
         indices[3 * t..3 * t + 3].copy_from_slice(&[a, c, d]);
         indices[3 * t2..3 * t2 + 3].copy_from_slice(&[c, b, d]);
@@ -326,11 +340,24 @@ pub fn repair(vertices: &[WorkVertex], indices: &mut Vec<u32>) -> RepairCounts {
             (b, d, t2),
             (d, c, t2),
         ] {
-            edge.insert((x, y), tt);
+            edge.insert(directed(x, y), tt);
         }
         counts.flipped += 1;
     }
     counts
+}
+
+/// Remove the triangles marked in `drop` (when `any`), keeping the others in order.
+fn drop_marked(indices: &mut Vec<u32>, drop: &[bool], any: bool) {
+    if !any {
+        return;
+    }
+    let mut t = 0;
+    indices.retain(|_| {
+        let keep = !drop[t / 3];
+        t += 1;
+        keep
+    });
 }
 
 /// For every merged vertex, the surviving vertex it moves to: itself if it survived,
@@ -481,7 +508,7 @@ mod tests {
         let b = grid_patch(10, 100);
         let m = merge(&[&a, &b]);
         assert_eq!(m.vertices.len(), 2 * 121 - 11);
-        let locks = border_locks(&m.vertices, &m.indices);
+        let locks = border_locks(&position_ids(&m.vertices), &m.indices);
         // Only the outer rectangle is locked: 2*(20+10) border vertices.
         assert_eq!(locks.iter().filter(|&&l| l).count(), 60);
     }
@@ -490,7 +517,7 @@ mod tests {
     fn simplify_keeps_locked_border_and_hits_target() {
         let a = grid_patch(20, 0);
         let m = merge(&[&a]);
-        let locks = border_locks(&m.vertices, &m.indices);
+        let locks = border_locks(&position_ids(&m.vertices), &m.indices);
         let cfg = SimplifyConfig {
             node_triangles: 100,
             normal_weight: 0.5,
@@ -532,7 +559,7 @@ mod tests {
         let verts = vec![v(0, 0), v(2, 0), v(4, 0), v(2, 3), v(0, 6), v(4, 6)];
         let (a, c, b, d, e, f) = (0u32, 1, 2, 3, 4, 5);
         let mut idx = vec![a, c, b, a, b, d, b, f, d, f, e, d, e, a, d];
-        let r = repair(&verts, &mut idx);
+        let r = repair(&verts, &position_ids(&verts), &mut idx);
         assert_eq!(r.flipped, 1);
         assert_eq!(&idx[..6], &[a, c, d, c, b, d]);
         // Border edges A->C and C->B survive; AB is gone.
@@ -544,9 +571,9 @@ mod tests {
         // The same ear next to a border vertex D is left alone: flipping would make a
         // triangle with three border corners.
         let mut idx = vec![a, c, b, a, b, d];
-        assert_eq!(repair(&verts[..4], &mut idx).flipped, 0);
+        assert_eq!(repair(&verts[..4], &position_ids(&verts[..4]), &mut idx).flipped, 0);
         let mut folded = vec![0u32, 1, 3, 0, 3, 1, 1, 2, 3];
-        let r = repair(&verts, &mut folded);
+        let r = repair(&verts, &position_ids(&verts), &mut folded);
         assert_eq!(r.folded_pairs_removed, 1);
         assert_eq!(folded, vec![1, 2, 3]);
     }

@@ -11,6 +11,7 @@ use crate::diamond::{self, SimplifyConfig};
 use crate::import::Imported;
 use crate::partition::{parent_id, read_leaf_faces, tet_id, Leaf, Partition, TetId};
 use crate::patch::{grid_to_local, remove_bad_triangles, Welder, WorkPatch, WorkVertex};
+use crate::timing::{Phase, Phases};
 use crate::{BuildError, BuildOptions, BuildReport, Progress};
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
@@ -67,6 +68,7 @@ struct Ctx<'a> {
     attributes: u32,
     cfg: SimplifyConfig,
     step: f64,
+    phases: Phases,
 }
 
 /// Leaf vertices read from the memory-mapped vertex store between two releases of its
@@ -117,6 +119,7 @@ impl Ctx<'_> {
 
     /// A leaf's patch from its bucket: weld, clean, optimise.
     fn load_leaf(&self, leaf: &Leaf) -> Result<WorkPatch, BuildError> {
+        let mut lap = self.phases.lap();
         let faces = read_leaf_faces(&self.buckets, &self.part.buckets, leaf)?;
         let mut local: FxHashMap<u32, u32> =
             FxHashMap::with_capacity_and_hasher(faces.len(), Default::default());
@@ -151,6 +154,7 @@ impl Ctx<'_> {
             .map(|v| crate::bounds::dist2(grid_to_local(v.q, self.step), self.box_center))
             .fold(0.0f64, f64::max);
         self.leaf_far2.fetch_max(far2.to_bits(), Ordering::Relaxed);
+        lap.mark(Phase::LeafLoad);
         let c = remove_bad_triangles(&mut indices, &w.vertices);
         self.degenerate.fetch_add(c.degenerate, Ordering::Relaxed);
         self.duplicate.fetch_add(c.duplicate, Ordering::Relaxed);
@@ -158,7 +162,9 @@ impl Ctx<'_> {
             vertices: w.vertices,
             indices,
         };
+        lap.mark(Phase::LeafClean);
         p.optimize();
+        lap.mark(Phase::LeafOptimize);
         Ok(p)
     }
 
@@ -248,6 +254,7 @@ impl Ctx<'_> {
 
     /// One diamond (ATP 5.2).
     fn process_diamond(&self, tets: &[Tet]) -> Result<(), BuildError> {
+        let mut lap = self.phases.lap();
         // 1. The children of every tetrahedron of the diamond.
         let mut kids: Vec<(TetId, WorkPatch)> = Vec::new();
         let mut per_tet_tris = vec![0usize; tets.len()];
@@ -259,22 +266,29 @@ impl Ctx<'_> {
                 }
             }
         }
+        lap.mark(Phase::Children);
         // 2. Merge, lock the outer border, simplify.
         let refs: Vec<&WorkPatch> = kids.iter().map(|k| &k.1).collect();
         let merged = diamond::merge(&refs);
-        let locks = diamond::border_locks(&merged.vertices, &merged.indices);
+        lap.mark(Phase::Merge);
+        let pid = diamond::position_ids(&merged.vertices);
+        let locks = diamond::border_locks(&pid, &merged.indices);
+        lap.mark(Phase::BorderLocks);
         let target: usize = per_tet_tris
             .iter()
             .map(|&n| parent_target(n, self.cfg.node_triangles))
             .sum();
         let (mut simplified, err_grid) = diamond::simplify(&merged, &locks, target, &self.cfg);
-        let fixed = diamond::repair(&merged.vertices, &mut simplified);
+        lap.mark(Phase::Simplify);
+        let fixed = diamond::repair(&merged.vertices, &pid, &mut simplified);
+        lap.mark(Phase::Repair);
         self.repaired.fetch_add(
             fixed.flipped + fixed.folded_pairs_removed,
             Ordering::Relaxed,
         );
         // 3. Morph destinations; the children are now complete and can be written.
         let dest = diamond::morph_destinations(&merged, &simplified);
+        lap.mark(Phase::Morph);
         let mut child_err = 0.0f64;
         let mut balls = Vec::new();
         for (k, (id, p)) in kids.iter().enumerate() {
@@ -293,6 +307,7 @@ impl Ctx<'_> {
             child_err = child_err.max(n.error);
             balls.push(n.sat);
         }
+        lap.mark(Phase::Emit);
         // 4. Split into the parent tetrahedra.
         let level = tets[0].level;
         let grid = self.part.grid;
@@ -319,6 +334,7 @@ impl Ctx<'_> {
                 .unwrap_or(0)
         };
         let mut parts = diamond::split(&merged, &simplified, tets.len(), owner);
+        lap.mark(Phase::Split);
         // 5. Bounds and saturation.
         let error = err_grid as f64 * self.step + child_err;
         let mut tights = Vec::with_capacity(parts.len());
@@ -330,6 +346,7 @@ impl Ctx<'_> {
             }
             tights.push(s);
         }
+        lap.mark(Phase::Optimize);
         let sat = stored(&Sphere::of_balls(&balls), grid.size);
         let diamond_id = self.diamond_ids.fetch_add(1, Ordering::Relaxed);
         for (t, (p, tight)) in tets.iter().zip(parts.iter().zip(tights)) {
@@ -356,6 +373,7 @@ impl Ctx<'_> {
                 .map_err(|_| self.internal_err("poisoned node map"))?
                 .insert(tet_id(t), info);
         }
+        lap.mark(Phase::Spool);
         Ok(())
     }
 }
@@ -430,6 +448,7 @@ pub(crate) fn build_hierarchy(
             use_normals: !imp.normals_computed,
         },
         step: part.grid.step(),
+        phases: Phases::default(),
     };
     let total_diamonds: usize = by_level.iter().map(|m| m.len()).sum();
     progress.stage("simplify diamonds", total_diamonds as u64);
@@ -459,6 +478,7 @@ pub(crate) fn build_hierarchy(
         );
     }
     progress.finish_stage();
+    ctx.phases.log();
     // Roots: encode (no morph targets); unsplit roots are leaves, loaded here.
     for r in 0..6u8 {
         let id = (r, 0u8, 0u64);

@@ -21,6 +21,7 @@ mod hierarchy;
 pub mod import;
 pub mod partition;
 pub mod patch;
+mod timing;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;

@@ -165,7 +165,7 @@ pub fn encode_patch(patch: &PatchData, attributes: u32, quant_min: [u32; 3]) -> 
     }
     let mut payload = Cow::Borrowed(&raw[..]);
     if !raw.is_empty() {
-        if let Ok(z) = zstd::bulk::compress(&raw, ZSTD_LEVEL) {
+        if let Ok(z) = zstd_compress(&raw) {
             if z.len() < raw.len() {
                 flags |= PATCH_FLAG_ZSTD;
                 payload = Cow::Owned(z);
@@ -189,6 +189,42 @@ pub fn encode_patch(patch: &PatchData, attributes: u32, quant_min: [u32; 3]) -> 
     out
 }
 
+thread_local! {
+    /// One zstd context per thread: creating one costs more than compressing a small
+    /// patch (the builder encodes tens of thousands of patches, the viewer decodes them).
+    static ZSTD_C: std::cell::RefCell<Option<zstd::bulk::Compressor<'static>>> =
+        const { std::cell::RefCell::new(None) };
+    static ZSTD_D: std::cell::RefCell<Option<zstd::bulk::Decompressor<'static>>> =
+        const { std::cell::RefCell::new(None) };
+}
+
+fn zstd_compress(raw: &[u8]) -> std::io::Result<Vec<u8>> {
+    ZSTD_C.with(|c| {
+        let mut c = c.borrow_mut();
+        if c.is_none() {
+            *c = Some(zstd::bulk::Compressor::new(ZSTD_LEVEL)?);
+        }
+        match c.as_mut() {
+            Some(c) => c.compress(raw),
+            None => zstd::bulk::compress(raw, ZSTD_LEVEL),
+        }
+    })
+}
+
+/// Decompresses one frame of at most `capacity` bytes.
+fn zstd_decompress(stored: &[u8], capacity: usize) -> std::io::Result<Vec<u8>> {
+    ZSTD_D.with(|d| {
+        let mut d = d.borrow_mut();
+        if d.is_none() {
+            *d = Some(zstd::bulk::Decompressor::new()?);
+        }
+        match d.as_mut() {
+            Some(d) => d.decompress(stored, capacity),
+            None => zstd::bulk::decompress(stored, capacity),
+        }
+    })
+}
+
 /// Rice parameters are `0..=MAX_RICE_K`.
 const MAX_RICE_K: u32 = 7;
 /// A Rice quotient of this many or more is escaped: this many 1 bits, then the value's
@@ -210,8 +246,19 @@ fn encode_normals(patch: &PatchData) -> Vec<u8> {
     }
     let streams = [&z[..n], &z[n..]];
     let ks = streams.map(|st| {
+        // The cheapest parameter from a histogram of the residuals: one pass over the
+        // stream instead of one per parameter.
+        let mut hist = [0u64; 256];
+        for &v in st {
+            hist[v as usize] += 1;
+        }
         (0..=MAX_RICE_K)
-            .min_by_key(|&k| st.iter().map(|&v| rice_bits(v, k) as u64).sum::<u64>())
+            .min_by_key(|&k| {
+                hist.iter()
+                    .enumerate()
+                    .map(|(v, &c)| c * rice_bits(v as u8, k) as u64)
+                    .sum::<u64>()
+            })
             .unwrap_or(0)
     });
     let mut out = vec![ks[0] as u8, ks[1] as u8];
@@ -381,7 +428,13 @@ fn oct_predict(v: [f64; 3]) -> [u8; 2] {
         x = (1.0 - oy.abs()) * if ox >= 0.0 { 1.0 } else { -1.0 };
         y = (1.0 - ox.abs()) * if oy >= 0.0 { 1.0 } else { -1.0 };
     }
-    let q = |c: f64| ((c * 127.0 + 0.5).floor() as i32).clamp(-127, 127) as i8 as u8;
+    let q = |c: f64| {
+        // floor by integer conversion (see `floor_ceil`); exact for these magnitudes.
+        let y = c * 127.0 + 0.5;
+        let t = y as i32;
+        let f = if t as f64 > y { t - 1 } else { t };
+        f.clamp(-127, 127) as i8 as u8
+    };
     [q(x), q(y)]
 }
 
@@ -725,7 +778,7 @@ pub fn decode_patch(
 
     let stored = &bytes[PATCH_HEADER_BYTES..];
     let payload: Cow<[u8]> = if flags & PATCH_FLAG_ZSTD != 0 {
-        let out = zstd::bulk::decompress(stored, raw_len as usize)
+        let out = zstd_decompress(stored, raw_len as usize)
             .map_err(|e| corrupt(format!("zstd: {e}")))?;
         Cow::Owned(out)
     } else {
@@ -822,8 +875,8 @@ pub fn oct_encode(n: [f32; 3]) -> [u8; 2] {
     let (fx, fy) = (x.clamp(-1.0, 1.0) * 127.0, y.clamp(-1.0, 1.0) * 127.0);
     let mut best = [0u8; 2];
     let mut best_dot = f32::NEG_INFINITY;
-    for qx in [fx.floor(), fx.ceil()] {
-        for qy in [fy.floor(), fy.ceil()] {
+    for qx in floor_ceil(fx) {
+        for qy in floor_ceil(fy) {
             let e = [(qx as i8) as u8, (qy as i8) as u8];
             let d = oct_decode(e);
             let dot = d[0] * unit[0] + d[1] * unit[1] + d[2] * unit[2];
@@ -848,6 +901,15 @@ pub fn oct_decode(e: [u8; 2]) -> [f32; 3] {
     };
     let len = (x * x + y * y + z * z).sqrt();
     [x / len, y / len, z / len]
+}
+
+/// `[v.floor(), v.ceil()]` for `|v| <= 127` by integer conversion: `f32::floor` is a
+/// libm call on baseline x86-64, and this runs for every vertex of every patch.
+fn floor_ceil(v: f32) -> [f32; 2] {
+    let t = v as i32 as f32; // truncates towards zero
+    let f = if t > v { t - 1.0 } else { t };
+    let c = if f < v { f + 1.0 } else { f };
+    [f, c]
 }
 
 fn sign(v: f32) -> f32 {
