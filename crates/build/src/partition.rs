@@ -13,7 +13,7 @@
 use crate::import::Imported;
 use crate::{BuildError, BuildOptions, Progress};
 use rayon::prelude::*;
-use std::collections::{HashMap, HashSet};
+use rustc_hash::{FxHashMap as HashMap, FxHashSet as HashSet};
 use std::fs::File;
 use std::io::{BufReader, BufWriter, Read, Write};
 use std::os::unix::fs::FileExt;
@@ -52,9 +52,13 @@ impl Grid {
     /// Nearest grid point, clamped into `[0, 2^bits]`.
     pub fn quantize(&self, p: [f32; 3]) -> [u32; 3] {
         let n = (1u64 << self.bits) as f64;
+        let cells_per_unit = n / self.size;
         std::array::from_fn(|i| {
-            let t = (p[i] as f64 - self.origin[i]) / self.size * n;
-            t.round().clamp(0.0, n) as u32
+            let t = (p[i] as f64 - self.origin[i]) * cells_per_unit;
+            // Round half up by truncation after clamping (non-negative, so truncation is
+            // floor): `f64::round` is a libm call on baseline x86-64, and this runs for
+            // every corner of every triangle.
+            (t.clamp(0.0, n) + 0.5) as u32
         })
     }
 
@@ -263,7 +267,7 @@ fn crowded_cells(
     opts: &BuildOptions,
 ) -> Result<HashSet<u64>, BuildError> {
     let chunk = chunk_faces(opts);
-    let mut counts: HashMap<u64, u64> = HashMap::new();
+    let mut counts: HashMap<u64, u64> = HashMap::default();
     let mut r = BufReader::with_capacity(
         1 << 20,
         File::open(keys).map_err(|e| BuildError::io(keys, e))?,
@@ -428,12 +432,12 @@ fn choose_splits(
     let chunk = chunk_faces(opts);
     let mut over_full: Vec<TetId> = Vec::new();
     // Prefixes (at `from`) whose subtrees must be counted deeper.
-    let mut heavy: HashSet<u64> = HashSet::new();
+    let mut heavy: HashSet<u64> = HashSet::default();
     let mut from = 0u8;
     loop {
         let to = (from + BAND).min(depth);
         progress.stage(&format!("count levels {from}..{to}"), faces);
-        let mut counts: HashMap<u64, u64> = HashMap::new();
+        let mut counts: HashMap<u64, u64> = HashMap::default();
         let mut r = BufReader::with_capacity(
             1 << 20,
             File::open(keys).map_err(|e| BuildError::io(keys, e))?,
@@ -456,7 +460,7 @@ fn choose_splits(
         progress.finish_stage();
         // Aggregate upwards within the band; nodes over the cap must split.
         let mut level_counts = counts;
-        let mut next_heavy = HashSet::new();
+        let mut next_heavy = HashSet::default();
         for d in (from..=to).rev() {
             if d < depth {
                 for (&p, &c) in &level_counts {
@@ -469,7 +473,7 @@ fn choose_splits(
                 }
             }
             if d > from {
-                let mut up: HashMap<u64, u64> = HashMap::with_capacity(level_counts.len() / 2 + 1);
+                let mut up: HashMap<u64, u64> = HashMap::with_capacity_and_hasher(level_counts.len() / 2 + 1, Default::default());
                 for (p, c) in level_counts {
                     *up.entry(p >> 1).or_default() += c;
                 }
@@ -487,7 +491,7 @@ fn choose_splits(
     // Conformity closure, coarse to fine.
     over_full.sort_by_key(|id| (id.1, id.0, id.2));
     over_full.dedup();
-    let mut split = HashSet::new();
+    let mut split = HashSet::default();
     for id in over_full {
         if let Some(t) = Tet::from_path(id.0, id.1, id.2) {
             ensure_split(&t, &mut split);
@@ -677,7 +681,7 @@ mod tests {
         // Why: a split tetrahedron whose diamond mates do not exist breaks the diamond
         // rule that crack-free cuts rest on.
         let t = Tet::locate_scaled([700_001, 300_003, 200_002], 1, 12).unwrap();
-        let mut split = HashSet::new();
+        let mut split = HashSet::default();
         ensure_split(&t, &mut split);
         for &(r, l, p) in &split {
             let s = Tet::from_path(r, l, p).unwrap();

@@ -98,6 +98,41 @@ pub struct Locator {
     chain: Vec<(Tet, SplitPlane)>,
     /// Child taken at each level of the chain.
     taken: Vec<u8>,
+    /// Face planes of the chain's deepest tetrahedron, when computed: a point strictly
+    /// inside it has the same answer as the last one without walking the chain.
+    faces: Option<[FacePlane; 4]>,
+}
+
+/// One face plane of a tetrahedron, oriented so the tetrahedron is on the positive side.
+#[derive(Clone, Copy, Debug)]
+struct FacePlane {
+    /// Normal with entries in {-1, 0, 1} (see [`SplitPlane`]).
+    normal: Point,
+    /// `normal . v` for a vertex `v` on the face, in lattice units.
+    offset: i64,
+}
+
+impl FacePlane {
+    /// The four faces of `t`, each facing the vertex it does not hold.
+    fn of(t: &Tet) -> [FacePlane; 4] {
+        std::array::from_fn(|i| {
+            let [a, b, c] = [(i + 1) % 4, (i + 2) % 4, (i + 3) % 4].map(|k| t.v[k]);
+            let mut normal = normalise(cross(sub(b, a), sub(c, a)));
+            if dot(normal, sub(t.v[i], a)) < 0 {
+                normal = normal.map(|x| -x);
+            }
+            FacePlane {
+                normal,
+                offset: dot(normal, a),
+            }
+        })
+    }
+
+    /// Whether the scaled point is strictly on the tetrahedron's side.
+    #[inline]
+    fn strictly_inside(&self, p: Point, scale: i64) -> bool {
+        dot(self.normal, p) > self.offset * scale
+    }
 }
 
 impl Locator {
@@ -110,6 +145,7 @@ impl Locator {
             root: None,
             chain: Vec::with_capacity(depth as usize),
             taken: vec![0; depth as usize],
+            faces: None,
         }
     }
 
@@ -119,6 +155,13 @@ impl Locator {
         let s = self.scale;
         if p.iter().any(|&c| c < 0 || c > CUBE * s) {
             return None;
+        }
+        // Fast path: strictly inside the last answer's tetrahedron (no tie to break), so
+        // inside every tetrahedron of the chain too.
+        if let (Some(faces), Some(r)) = (&self.faces, self.root) {
+            if faces.iter().all(|f| f.strictly_inside(p, s)) {
+                return Some(self.key(r));
+            }
         }
         let r = ROOT_AXES
             .iter()
@@ -154,6 +197,11 @@ impl Locator {
         }
         if self.depth == 0 {
             self.chain.clear();
+            self.faces = None;
+        } else {
+            let (t, _) = self.chain[self.depth as usize - 1];
+            let leaf = t.children()[self.taken[self.depth as usize - 1] as usize];
+            self.faces = Some(FacePlane::of(&leaf));
         }
         Some(self.key(r))
     }

@@ -177,6 +177,21 @@ proptest! {
     }
 
     #[test]
+    fn locator_agrees_with_locate_on_walks(start in (0..CUBE, 0..CUBE, 0..CUBE), steps in prop::collection::vec((-3i64..=3, -3i64..=3, -3i64..=3), 1..200), unit in 0u32..18, depth in 1u8..30) {
+        // Why: consecutive triangles of a mesh are neighbours, so most queries hit the
+        // locator's strictly-inside shortcut; points on faces and planes (a walk on a
+        // coarse lattice of the cube) must still get the plain descent's tie-breaking.
+        let mut loc = Locator::new(depth, 3);
+        let u = 1i64 << unit;
+        let mut p = [start.0, start.1, start.2].map(|c| (c / u) * u * 3);
+        for (dx, dy, dz) in steps {
+            p = [p[0] + dx * u, p[1] + dy * u, p[2] + dz * u].map(|c| c.clamp(0, 3 * CUBE));
+            let expect = Tet::locate_scaled(p, 3, depth).map(|t| t.dfs_key());
+            prop_assert_eq!(loc.locate(p), expect);
+        }
+    }
+
+    #[test]
     fn scaled_location_agrees(x in 0..CUBE, y in 0..CUBE, z in 0..CUBE, level in 0u8..30) {
         let a = Tet::locate_scaled([x, y, z], 1, level).unwrap();
         let b = Tet::locate_scaled([3 * x, 3 * y, 3 * z], 3, level).unwrap();
