@@ -10,7 +10,7 @@ use crate::bounds::Sphere;
 use crate::diamond::{self, SimplifyConfig};
 use crate::import::Imported;
 use crate::partition::{parent_id, read_leaf_faces, tet_id, Leaf, Partition, TetId};
-use crate::patch::{grid_to_local, remove_bad_triangles, Welder, WorkPatch, WorkVertex};
+use crate::patch::{grid_to_local, CacheOrder, remove_bad_triangles, Welder, WorkPatch, WorkVertex};
 use crate::timing::{Phase, Phases};
 use crate::{BuildError, BuildOptions, BuildReport, Progress};
 use rayon::prelude::*;
@@ -163,7 +163,7 @@ impl Ctx<'_> {
             indices,
         };
         lap.mark(Phase::LeafClean);
-        p.optimize();
+        p.optimize(CacheOrder::Fifo);
         lap.mark(Phase::LeafOptimize);
         Ok(p)
     }
@@ -339,7 +339,7 @@ impl Ctx<'_> {
         let error = err_grid as f64 * self.step + child_err;
         let mut tights = Vec::with_capacity(parts.len());
         for p in parts.iter_mut() {
-            p.optimize();
+            p.optimize(CacheOrder::Table);
             let s = (!p.indices.is_empty()).then(|| stored(&p.tight_sphere(self.step), grid.size));
             if let Some(s) = s {
                 balls.push(s);
