@@ -69,6 +69,64 @@ impl Grid {
     }
 }
 
+/// Every input vertex's grid position (12 bytes each), in a memory-mapped temporary
+/// file: the key passes read three per triangle, a third of the bytes of the full vertex
+/// store and no quantisation arithmetic (each vertex is quantised once, not once per
+/// triangle that uses it).
+pub struct QuantStore {
+    map: Option<memmap2::Mmap>,
+}
+
+impl QuantStore {
+    /// Quantises the whole vertex store into `path`, in parallel chunks.
+    pub fn create(imp: &Imported, grid: &Grid, path: &Path) -> Result<QuantStore, BuildError> {
+        const CHUNK: u64 = 1 << 20;
+        let mut w = BufWriter::with_capacity(
+            1 << 20,
+            File::create(path).map_err(|e| BuildError::io(path, e))?,
+        );
+        let mut at = 0u64;
+        while at < imp.vertex_count {
+            let n = (imp.vertex_count - at).min(CHUNK);
+            let q: Vec<[u32; 3]> = (at..at + n)
+                .into_par_iter()
+                .map(|i| grid.quantize(imp.vertices.get(i as u32).position))
+                .collect();
+            w.write_all(bytemuck::cast_slice(&q))
+                .map_err(|e| BuildError::io(path, e))?;
+            at += n;
+            imp.vertices.release();
+        }
+        w.into_inner()
+            .map_err(|e| BuildError::io(path, e.into_error()))?;
+        let file = File::open(path).map_err(|e| BuildError::io(path, e))?;
+        if imp.vertex_count == 0 {
+            return Ok(QuantStore { map: None });
+        }
+        // SAFETY: our own temporary file, written above and never modified again.
+        let map = unsafe { memmap2::Mmap::map(&file) }.map_err(|e| BuildError::io(path, e))?;
+        let _ = map.advise(memmap2::Advice::Random); // see VertexStore::open
+        Ok(QuantStore { map: Some(map) })
+    }
+
+    /// Grid position of vertex `i` (indices were validated at import).
+    #[inline]
+    pub fn get(&self, i: u32) -> [u32; 3] {
+        let b = self.map.as_deref().unwrap_or(&[]);
+        let o = i as usize * 12;
+        bytemuck::pod_read_unaligned(&b[o..o + 12])
+    }
+
+    /// Drops this process's resident pages of the map (see `VertexStore::release`).
+    pub fn release(&self) {
+        if let Some(m) = &self.map {
+            // SAFETY: DONTNEED on a read-only shared file mapping only discards page
+            // table entries; later reads fault the same file contents back in.
+            let _ = unsafe { m.unchecked_advise(memmap2::UncheckedAdvice::DontNeed) };
+        }
+    }
+}
+
 /// A node of the forest by name: root, level, path (as in `tessera_tetra::Tet`).
 pub type TetId = (u8, u8, u64);
 
@@ -117,25 +175,35 @@ pub fn auto_quant_bits(cube_size: f64, mean_edge: f64) -> u32 {
     ((cube_size * 16.0 / mean_edge).log2().ceil() as i64).clamp(8, 21) as u32
 }
 
-/// Mean edge length over an evenly spread sample of at most 65536 triangles.
-fn mean_edge_length(imp: &Imported) -> Result<f64, BuildError> {
-    const SAMPLES: u64 = 1 << 16;
+/// Faces sampled for the mean edge length and the key depth.
+const SAMPLES: u64 = 1 << 16;
+
+/// At most [`SAMPLES`] faces, evenly spread over the face list (all of them if fewer).
+fn sample_faces(imp: &Imported) -> Result<Vec<[u32; 3]>, BuildError> {
     let fp = &imp.faces_path;
     let file = File::open(fp).map_err(|e| BuildError::io(fp, e))?;
     let stride = (imp.face_count / SAMPLES).max(1);
-    let (mut sum, mut n) = (0.0f64, 0u64);
+    let mut out = Vec::with_capacity(imp.face_count.min(SAMPLES + 1) as usize);
     let mut f = 0u64;
     while f < imp.face_count {
         let mut b = [0u8; 12];
         file.read_exact_at(&mut b, f * 12)
             .map_err(|e| BuildError::io(fp, e))?;
-        let t: [u32; 3] = bytemuck::cast(b);
+        out.push(bytemuck::cast(b));
+        f += stride;
+    }
+    Ok(out)
+}
+
+/// Mean edge length of the sampled faces.
+fn mean_edge_length(imp: &Imported, sample: &[[u32; 3]]) -> f64 {
+    let (mut sum, mut n) = (0.0f64, 0u64);
+    for t in sample {
         let p = t.map(|i| imp.vertices.get(i).position.map(|c| c as f64));
         for k in 0..3 {
             sum += crate::bounds::dist2(p[k], p[(k + 1) % 3]).sqrt();
         }
         n += 3;
-        f += stride;
         // Samples are spread over the whole store: without releasing, nearly every page
         // of it would end up resident.
         if n % (3 << 12) == 0 {
@@ -143,7 +211,11 @@ fn mean_edge_length(imp: &Imported) -> Result<f64, BuildError> {
         }
     }
     imp.vertices.release();
-    Ok(if n > 0 { sum / n as f64 } else { 0.0 })
+    if n > 0 {
+        sum / n as f64
+    } else {
+        0.0
+    }
 }
 
 /// Faces per chunk in passes that read the memory-mapped vertex store: small enough that
@@ -173,19 +245,22 @@ pub fn partition(
     progress: &dyn Progress,
 ) -> Result<Partition, BuildError> {
     let size = Grid::new(imp.bounds.min, imp.bounds.max, 1).size;
-    let mean_edge = mean_edge_length(imp)?;
+    let sample = sample_faces(imp)?;
+    let mean_edge = mean_edge_length(imp, &sample);
     let bits = opts
         .quant_bits
         .unwrap_or_else(|| auto_quant_bits(size, mean_edge));
     let grid = Grid::new(imp.bounds.min, imp.bounds.max, bits);
-    let (shallow, deep) = key_depths(imp.face_count, grid.bits, opts);
     let keys_path = tmp.join("keys.bin");
     let t = std::time::Instant::now();
-    write_keys(imp, &grid, shallow, &keys_path, opts, progress)?;
+    let qpath = tmp.join("quantized.bin");
+    let qs = QuantStore::create(imp, &grid, &qpath)?;
+    let (shallow, deep) = key_depths(&qs, &grid, &sample, imp.face_count, opts);
+    write_keys(imp, &qs, &grid, shallow, &keys_path, opts, progress)?;
     let crowded = crowded_cells(&keys_path, imp.face_count, shallow, opts)?;
     let key_depth = if crowded.is_empty() { shallow } else { deep };
     deepen_keys(
-        imp, &grid, &keys_path, shallow, deep, &crowded, opts, progress,
+        imp, &qs, &grid, &keys_path, shallow, deep, &crowded, opts, progress,
     )?;
     tracing::info!(
         seconds = t.elapsed().as_secs_f64(),
@@ -206,6 +281,7 @@ pub fn partition(
         .collect();
     deepen_keys(
         imp,
+        &qs,
         &grid,
         &keys_path,
         shallow,
@@ -230,6 +306,8 @@ pub fn partition(
         peak_rss_mib = crate::peak_rss_mib(),
         "partition: routing"
     );
+    drop(qs);
+    let _ = std::fs::remove_file(&qpath);
     let _ = std::fs::remove_file(&keys_path);
     Ok(Partition {
         grid,
@@ -242,21 +320,55 @@ pub fn partition(
     })
 }
 
-/// How deep to key triangles: `(shallow, deep)`. Leaves of a surface sit near depth
-/// `1.5 log2(N / cap)` (a surface crosses ~4^j of the 8^j cubes of octree level j, and 3
-/// tetrahedron levels make one octree level). Every triangle is first keyed 6 levels
-/// below that; only triangles in cells still over the limit there are keyed again, 12
-/// levels deeper (density contrasts of ~250x at full leaf size). Deep keys cost time on
-/// every triangle they are computed for, so most inputs never pay for them. Never deeper
-/// than the quantisation grid or 36 levels (4096 cells per cube edge).
-fn key_depths(faces: u64, bits: u32, opts: &BuildOptions) -> (u8, u8) {
-    let leaves = (faces as f64 / opts.leaf_triangles as f64).max(1.0);
-    let limit = 36.min(3 * bits).min(MAX_LEVEL as u32);
-    let shallow = ((1.5 * leaves.log2()).round() as u32 + 6)
-        .clamp(12, 36)
-        .min(limit);
+/// How deep to key triangles: `(shallow, deep)`. Every triangle is keyed at `shallow`;
+/// only triangles in cells still over the leaf limit there are keyed again at `deep`, 12
+/// levels deeper (density contrasts of ~250x at full leaf size). Deeper keys cost time on
+/// every triangle (the locator's shortcut hits less often as cells shrink), so `shallow`
+/// is measured on the sample: the shallowest depth at which at most 1/16 of the
+/// triangles lie in cells estimated over half a leaf (at least 12). On the 10M sphere
+/// that is 19 levels, where the fixed `1.5 log2(N / cap) + 6` used before gave 23, and
+/// the key pass went from 1.9 s to 0.9-1.1 s; a margin of 1 or 2 more levels was
+/// measured slower and found the same splits.
+fn key_depths(
+    qs: &QuantStore,
+    grid: &Grid,
+    sample: &[[u32; 3]],
+    faces: u64,
+    opts: &BuildOptions,
+) -> (u8, u8) {
+    let limit = 36.min(3 * grid.bits).min(MAX_LEVEL as u32) as u8;
+    let mut loc = Locator::new(limit, 3);
+    let mut keys: Vec<u64> = sample
+        .iter()
+        .filter_map(|t| loc.locate(grid.centroid3(t.map(|i| qs.get(i)))))
+        .collect();
+    qs.release();
+    keys.sort_unstable();
+    let per_sample = faces as f64 / keys.len().max(1) as f64;
+    let half_leaf = opts.leaf_triangles as f64 / 2.0;
+    // Share of the sampled faces that lie in cells over half a leaf at `depth` (keys are
+    // sorted, so cells are runs).
+    let crowded_share = |depth: u8| -> f64 {
+        let mut crowded = 0usize;
+        let mut start = 0;
+        for i in 1..=keys.len() {
+            if i == keys.len() || prefix(keys[i], depth) != prefix(keys[start], depth) {
+                if (i - start) as f64 * per_sample > half_leaf {
+                    crowded += i - start;
+                }
+                start = i;
+            }
+        }
+        crowded as f64 / keys.len().max(1) as f64
+    };
+    // A few dense spots (the poles of a latitude-longitude sphere, a close-up scan
+    // merged into a survey) are left to the deep pass rather than keying everything deep.
+    let fits = (0..=limit)
+        .find(|&d| crowded_share(d) <= 1.0 / 16.0)
+        .unwrap_or(limit);
+    let shallow = fits.clamp(12.min(limit), limit);
     let deep = (shallow + 12).min(limit);
-    (shallow as u8, deep as u8)
+    (shallow, deep)
 }
 
 /// Cells at depth `shallow` that hold more than a leaf's worth of triangles.
@@ -293,6 +405,7 @@ fn crowded_cells(
 #[allow(clippy::too_many_arguments)]
 fn deepen_keys(
     imp: &Imported,
+    qs: &QuantStore,
     grid: &Grid,
     keys: &Path,
     shallow: u8,
@@ -331,14 +444,13 @@ fn deepen_keys(
                     let mut loc = Locator::new(deep, 3);
                     for (key, t) in ks.iter_mut().zip(fs) {
                         if crowded.contains(&prefix(*key, shallow)) {
-                            let q = t.map(|i| grid.quantize(imp.vertices.get(i).position));
-                            *key = loc.locate(grid.centroid3(q)).unwrap_or(*key);
+                            *key = loc.locate(grid.centroid3(t.map(|i| qs.get(i)))).unwrap_or(*key);
                         }
                     }
                 });
             kf.write_all_at(bytemuck::cast_slice(&k), done * 8)
                 .map_err(|e| BuildError::io(keys, e))?;
-            imp.vertices.release();
+            qs.release();
         }
         done += n as u64;
         progress.advance(n as u64);
@@ -353,6 +465,7 @@ fn deepen_keys(
 /// Pass 1: one depth-first key per face.
 fn write_keys(
     imp: &Imported,
+    qs: &QuantStore,
     grid: &Grid,
     depth: u8,
     out: &Path,
@@ -382,10 +495,7 @@ fn write_keys(
                 let mut loc = Locator::new(depth, 3);
                 faces
                     .iter()
-                    .map(move |t| {
-                        let q = t.map(|i| grid.quantize(imp.vertices.get(i).position));
-                        loc.locate(grid.centroid3(q)).unwrap_or(0)
-                    })
+                    .map(move |t| loc.locate(grid.centroid3(t.map(|i| qs.get(i)))).unwrap_or(0))
                     .collect::<Vec<_>>()
             })
             .collect();
@@ -396,7 +506,7 @@ fn write_keys(
         if progress.cancelled() {
             return Err(BuildError::Interrupted);
         }
-        imp.vertices.release();
+        qs.release();
     }
     keys.into_inner()
         .map_err(|e| BuildError::io(out, e.into_error()))?;
