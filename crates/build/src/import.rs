@@ -42,33 +42,46 @@ pub struct Imported {
     pub report: ImportReport,
 }
 
-/// Read-only random access to the vertex store through a memory map. The map's resident
-/// pages count towards the process's RSS, so long passes call [`VertexStore::release`]
-/// now and then: the pages stay in the page cache, only our mapping forgets them.
-pub struct VertexStore {
+/// Read-only random access to a temporary file of fixed-size records (the vertex store,
+/// the quantised positions) through a memory map. The map's resident pages count towards
+/// the process's RSS, so long passes call [`RecordStore::release`] now and then: the
+/// pages stay in the page cache, only our mapping forgets them.
+pub struct RecordStore<T> {
     map: Option<Mmap>,
+    _record: std::marker::PhantomData<T>,
 }
 
-impl VertexStore {
-    pub fn open(path: &Path) -> Result<VertexStore, BuildError> {
+/// The vertex store: one [`StoredVertex`] per input vertex.
+pub type VertexStore = RecordStore<StoredVertex>;
+
+impl<T: Pod> RecordStore<T> {
+    pub fn open(path: &Path) -> Result<RecordStore<T>, BuildError> {
         let file = File::open(path).map_err(|e| BuildError::io(path, e))?;
         let len = file.metadata().map_err(|e| BuildError::io(path, e))?.len();
-        if len == 0 {
-            return Ok(VertexStore { map: None });
-        }
-        // SAFETY: the file is our own temporary file; nothing else writes it while mapped.
-        let map = unsafe { Mmap::map(&file) }.map_err(|e| BuildError::io(path, e))?;
-        // Access is scattered (a leaf's vertices, a face's corners): without this hint the
-        // kernel maps 16 neighbouring pages around every fault and RSS balloons.
-        let _ = map.advise(memmap2::Advice::Random);
-        Ok(VertexStore { map: Some(map) })
+        let map = if len == 0 {
+            None
+        } else {
+            // SAFETY: the file is our own temporary file; nothing else writes it while
+            // mapped.
+            let map = unsafe { Mmap::map(&file) }.map_err(|e| BuildError::io(path, e))?;
+            // Access is scattered (a leaf's vertices, a face's corners): without this hint
+            // the kernel maps 16 neighbouring pages around every fault and RSS balloons.
+            let _ = map.advise(memmap2::Advice::Random);
+            Some(map)
+        };
+        Ok(RecordStore {
+            map,
+            _record: std::marker::PhantomData,
+        })
     }
 
-    /// The vertex with global index `i` (the caller has validated indices at import).
-    pub fn get(&self, i: u32) -> StoredVertex {
+    /// Record `i` (the caller has validated indices at import).
+    #[inline]
+    pub fn get(&self, i: u32) -> T {
         let b = self.map.as_deref().unwrap_or(&[]);
-        let o = i as usize * 36;
-        bytemuck::pod_read_unaligned(&b[o..o + 36])
+        let size = std::mem::size_of::<T>();
+        let o = i as usize * size;
+        bytemuck::pod_read_unaligned(&b[o..o + size])
     }
 
     /// Drop this process's resident pages of the map (they remain in the page cache).

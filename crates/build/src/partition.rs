@@ -10,7 +10,7 @@
 //! those splits need to exist: the conformity closure); (3) route each triangle to its
 //! leaf's contiguous range of a bucket file, whose offsets the counts give.
 
-use crate::import::Imported;
+use crate::import::{Imported, RecordStore};
 use crate::{BuildError, BuildOptions, Progress};
 use rayon::prelude::*;
 use rustc_hash::{FxHashMap as HashMap, FxHashSet as HashSet};
@@ -73,58 +73,34 @@ impl Grid {
 /// file: the key passes read three per triangle, a third of the bytes of the full vertex
 /// store and no quantisation arithmetic (each vertex is quantised once, not once per
 /// triangle that uses it).
-pub struct QuantStore {
-    map: Option<memmap2::Mmap>,
-}
+pub type QuantStore = RecordStore<[u32; 3]>;
 
-impl QuantStore {
-    /// Quantises the whole vertex store into `path`, in parallel chunks.
-    pub fn create(imp: &Imported, grid: &Grid, path: &Path) -> Result<QuantStore, BuildError> {
-        const CHUNK: u64 = 1 << 20;
-        let mut w = BufWriter::with_capacity(
-            1 << 20,
-            File::create(path).map_err(|e| BuildError::io(path, e))?,
-        );
-        let mut at = 0u64;
-        while at < imp.vertex_count {
-            let n = (imp.vertex_count - at).min(CHUNK);
-            let q: Vec<[u32; 3]> = (at..at + n)
-                .into_par_iter()
-                .map(|i| grid.quantize(imp.vertices.get(i as u32).position))
-                .collect();
-            w.write_all(bytemuck::cast_slice(&q))
-                .map_err(|e| BuildError::io(path, e))?;
-            at += n;
-            imp.vertices.release();
-        }
-        w.into_inner()
-            .map_err(|e| BuildError::io(path, e.into_error()))?;
-        let file = File::open(path).map_err(|e| BuildError::io(path, e))?;
-        if imp.vertex_count == 0 {
-            return Ok(QuantStore { map: None });
-        }
-        // SAFETY: our own temporary file, written above and never modified again.
-        let map = unsafe { memmap2::Mmap::map(&file) }.map_err(|e| BuildError::io(path, e))?;
-        let _ = map.advise(memmap2::Advice::Random); // see VertexStore::open
-        Ok(QuantStore { map: Some(map) })
+/// Quantises the whole vertex store into `path`, in parallel chunks.
+pub fn quantize_vertices(
+    imp: &Imported,
+    grid: &Grid,
+    path: &Path,
+) -> Result<QuantStore, BuildError> {
+    const CHUNK: u64 = 1 << 20;
+    let mut w = BufWriter::with_capacity(
+        1 << 20,
+        File::create(path).map_err(|e| BuildError::io(path, e))?,
+    );
+    let mut at = 0u64;
+    while at < imp.vertex_count {
+        let n = (imp.vertex_count - at).min(CHUNK);
+        let q: Vec<[u32; 3]> = (at..at + n)
+            .into_par_iter()
+            .map(|i| grid.quantize(imp.vertices.get(i as u32).position))
+            .collect();
+        w.write_all(bytemuck::cast_slice(&q))
+            .map_err(|e| BuildError::io(path, e))?;
+        at += n;
+        imp.vertices.release();
     }
-
-    /// Grid position of vertex `i` (indices were validated at import).
-    #[inline]
-    pub fn get(&self, i: u32) -> [u32; 3] {
-        let b = self.map.as_deref().unwrap_or(&[]);
-        let o = i as usize * 12;
-        bytemuck::pod_read_unaligned(&b[o..o + 12])
-    }
-
-    /// Drops this process's resident pages of the map (see `VertexStore::release`).
-    pub fn release(&self) {
-        if let Some(m) = &self.map {
-            // SAFETY: DONTNEED on a read-only shared file mapping only discards page
-            // table entries; later reads fault the same file contents back in.
-            let _ = unsafe { m.unchecked_advise(memmap2::UncheckedAdvice::DontNeed) };
-        }
-    }
+    w.into_inner()
+        .map_err(|e| BuildError::io(path, e.into_error()))?;
+    QuantStore::open(path)
 }
 
 /// A node of the forest by name: root, level, path (as in `tessera_tetra::Tet`).
@@ -254,7 +230,7 @@ pub fn partition(
     let keys_path = tmp.join("keys.bin");
     let t = std::time::Instant::now();
     let qpath = tmp.join("quantized.bin");
-    let qs = QuantStore::create(imp, &grid, &qpath)?;
+    let qs = quantize_vertices(imp, &grid, &qpath)?;
     let (shallow, deep) = key_depths(&qs, &grid, &sample, imp.face_count, opts);
     write_keys(imp, &qs, &grid, shallow, &keys_path, opts, progress)?;
     let crowded = crowded_cells(&keys_path, imp.face_count, shallow, opts)?;
