@@ -111,7 +111,7 @@ impl Ctx<'_> {
         let s = self.imp.vertices.get(v);
         WorkVertex {
             q: self.part.grid.quantize(s.position),
-            normal: s.normal,
+            normal: self.imp.normal(v, &s),
             color: s.color,
             uv: s.uv,
         }
@@ -146,7 +146,7 @@ impl Ctx<'_> {
             + local.len() as u64;
         if loaded / RELEASE_EVERY_VERTICES != (loaded - local.len() as u64) / RELEASE_EVERY_VERTICES
         {
-            self.imp.vertices.release();
+            self.imp.release();
         }
         let far2 = w
             .vertices
@@ -469,7 +469,7 @@ pub(crate) fn build_hierarchy(
             progress.advance(1);
             r
         })?;
-        imp.vertices.release();
+        imp.release();
         tracing::info!(
             level,
             diamonds = diamonds.len(),
@@ -511,6 +511,13 @@ fn finalize(
         })
         .collect();
     infos.sort_by_key(|(m, n)| (n.id.1, *m, n.id.0, n.id.2));
+    // Diamond ids were handed out in completion order, which varies between runs:
+    // renumber them in table order so that a build is reproducible byte for byte.
+    let mut diamond_ids: FxHashMap<u32, u32> = FxHashMap::default();
+    for (_, n) in infos.iter_mut() {
+        let next = diamond_ids.len() as u32;
+        n.diamond = *diamond_ids.entry(n.diamond).or_insert(next);
+    }
     let index: FxHashMap<TetId, u32> = infos
         .iter()
         .enumerate()

@@ -243,14 +243,37 @@ fn build_in_pool(
             Ok(())
         }
     };
-    let imported = import::import(input, tmp.path(), progress)?;
+    let mut imported = import::import(input, tmp.path(), progress)?;
     check()?;
     report.input_vertices = imported.vertex_count;
     report.input_triangles = imported.face_count;
     report.import = imported.report.clone();
     report.normals_computed = imported.normals_computed;
     lap("import", &mut report);
-    let part = partition::partition(&imported, tmp.path(), opts, progress)?;
+    // Normals (when the input has none) are computed on their own thread beside the
+    // partition: it reads only positions, and the normals are first needed by the
+    // hierarchy.
+    let failed = std::sync::atomic::AtomicBool::new(false);
+    let stop = || progress.cancelled() || failed.load(std::sync::atomic::Ordering::Relaxed);
+    let (part, normals) = std::thread::scope(|s| {
+        let imp = &imported;
+        let normals = imp
+            .normals_computed
+            .then(|| s.spawn(|| import::compute_normals(imp, tmp.path(), &stop)));
+        let part = partition::partition(imp, tmp.path(), opts, progress);
+        if part.is_err() {
+            failed.store(true, std::sync::atomic::Ordering::Relaxed);
+        }
+        let normals = normals.map(|h| {
+            h.join()
+                .unwrap_or_else(|_| Err(BuildError::Internal("normals thread panicked".into())))
+        });
+        (part, normals)
+    });
+    let part = part?;
+    if let Some(n) = normals {
+        imported.normals = Some(n?);
+    }
     check()?;
     report.oversized_leaves = part.oversized_leaves;
     lap("partition", &mut report);
