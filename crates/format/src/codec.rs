@@ -30,8 +30,10 @@ const ATTR_ALL: u32 = ATTR_NORMALS | ATTR_COLORS | ATTR_UVS;
 /// meshopt vertex codec version and level used by the encoder (the decoder reads any).
 const VERTEX_CODEC_VERSION: i32 = 1;
 const VERTEX_CODEC_LEVEL: i32 = 3;
-/// zstd level for the section payload.
-const ZSTD_LEVEL: i32 = 5;
+/// zstd level for the section payload. Measured on whole builds: level 5 gave 0.6%
+/// fewer bytes (10M sphere 4.75 vs 4.78 B/triangle, Dragon 5.90 vs 5.93) for ~8% more
+/// encoding time; without zstd the files are 20-38% larger.
+const ZSTD_LEVEL: i32 = 3;
 
 /// Section order in the payload (and in the header's length table).
 const SEC_INDICES: usize = 0;
@@ -870,18 +872,20 @@ pub fn oct_encode(n: [f32; 3]) -> [u8; 2] {
         x = (1.0 - oy.abs()) * sign(ox);
         y = (1.0 - ox.abs()) * sign(oy);
     }
-    let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
-    let unit = [n[0] / len, n[1] / len, n[2] / len];
     let (fx, fy) = (x.clamp(-1.0, 1.0) * 127.0, y.clamp(-1.0, 1.0) * 127.0);
+    // The candidate whose decoded direction d has the largest cosine with n, compared as
+    // the sign-keeping square dot * |dot| / |d|^2: the same order as the cosine, without
+    // the square roots and divisions of four full decodes.
     let mut best = [0u8; 2];
-    let mut best_dot = f32::NEG_INFINITY;
+    let mut best_score = f32::NEG_INFINITY;
     for qx in floor_ceil(fx) {
         for qy in floor_ceil(fy) {
             let e = [(qx as i8) as u8, (qy as i8) as u8];
-            let d = oct_decode(e);
-            let dot = d[0] * unit[0] + d[1] * unit[1] + d[2] * unit[2];
-            if dot > best_dot {
-                best_dot = dot;
+            let d = oct_unnormalised(e);
+            let dot = d[0] * n[0] + d[1] * n[1] + d[2] * n[2];
+            let score = dot * dot.abs() / (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+            if score > best_score {
+                best_score = score;
                 best = e;
             }
         }
@@ -889,16 +893,21 @@ pub fn oct_encode(n: [f32; 3]) -> [u8; 2] {
     best
 }
 
-/// Decodes [`oct_encode`]'s bytes into a unit vector. Total on all inputs.
-pub fn oct_decode(e: [u8; 2]) -> [f32; 3] {
+/// The direction [`oct_decode`] returns for `e`, before normalisation.
+fn oct_unnormalised(e: [u8; 2]) -> [f32; 3] {
     let x = ((e[0] as i8) as f32 / 127.0).max(-1.0);
     let y = ((e[1] as i8) as f32 / 127.0).max(-1.0);
     let z = 1.0 - x.abs() - y.abs();
-    let (x, y) = if z < 0.0 {
-        ((1.0 - y.abs()) * sign(x), (1.0 - x.abs()) * sign(y))
+    if z < 0.0 {
+        [(1.0 - y.abs()) * sign(x), (1.0 - x.abs()) * sign(y), z]
     } else {
-        (x, y)
-    };
+        [x, y, z]
+    }
+}
+
+/// Decodes [`oct_encode`]'s bytes into a unit vector. Total on all inputs.
+pub fn oct_decode(e: [u8; 2]) -> [f32; 3] {
+    let [x, y, z] = oct_unnormalised(e);
     let len = (x * x + y * y + z * z).sqrt();
     [x / len, y / len, z / len]
 }
