@@ -628,7 +628,9 @@ fn leaves_of(split: &HashSet<TetId>) -> Vec<Leaf> {
         .collect()
 }
 
-/// Pass 3: count per leaf, then write faces grouped by leaf.
+/// Pass 3: each face's leaf (found once, by binary search over the leaves' key ranges,
+/// and kept in a temporary file of `u32`s) and the count per leaf; then the faces,
+/// grouped by leaf with a counting sort per chunk, one positional write per run.
 fn route(
     imp: &Imported,
     keys: &Path,
@@ -645,14 +647,15 @@ fn route(
         .iter()
         .map(|l| dfs_range(l.id.0, l.id.1, l.id.2).1)
         .collect();
-    let find = |key: u64| -> usize {
+    let find = |key: u64| -> u32 {
         let i = starts.partition_point(|&s| s <= key);
         debug_assert!(i > 0 && key < ends[i - 1], "leaves tile the key space");
-        i.saturating_sub(1)
+        i.saturating_sub(1) as u32
     };
     let chunk = chunk_faces(opts);
     let faces = imp.face_count;
-    // Count.
+    let ids_path = keys.with_extension("leaves");
+    // Count, and remember each face's leaf.
     progress.stage("route (count)", faces);
     let mut counts = vec![0u64; leaves.len()];
     {
@@ -660,20 +663,28 @@ fn route(
             1 << 20,
             File::open(keys).map_err(|e| BuildError::io(keys, e))?,
         );
+        let mut w = BufWriter::with_capacity(
+            1 << 20,
+            File::create(&ids_path).map_err(|e| BuildError::io(&ids_path, e))?,
+        );
         let mut done = 0u64;
         while done < faces {
             let n = ((faces - done) as usize).min(chunk);
             let k: Vec<u64> = read_chunk(&mut r, n, keys)?;
-            let ids: Vec<u32> = k.par_iter().map(|&key| find(key) as u32).collect();
-            for id in ids {
+            let ids: Vec<u32> = k.par_iter().map(|&key| find(key)).collect();
+            for &id in &ids {
                 counts[id as usize] += 1;
             }
+            w.write_all(bytemuck::cast_slice(&ids))
+                .map_err(|e| BuildError::io(&ids_path, e))?;
             done += n as u64;
             progress.advance(n as u64);
             if progress.cancelled() {
                 return Err(BuildError::Interrupted);
             }
         }
+        w.into_inner()
+            .map_err(|e| BuildError::io(&ids_path, e.into_error()))?;
     }
     progress.finish_stage();
     let mut cursor = vec![0u64; leaves.len()];
@@ -684,41 +695,61 @@ fn route(
         cursor[i] = acc;
         acc += counts[i];
     }
-    // Write: sort each chunk by leaf, one positional write per run.
+    // Write.
     progress.stage("route (write)", faces);
     let file = File::create(out).map_err(|e| BuildError::io(out, e))?;
     file.set_len(faces * 12)
         .map_err(|e| BuildError::io(out, e))?;
     let fp = &imp.faces_path;
-    let mut kr = BufReader::with_capacity(
+    let mut ir = BufReader::with_capacity(
         1 << 20,
-        File::open(keys).map_err(|e| BuildError::io(keys, e))?,
+        File::open(&ids_path).map_err(|e| BuildError::io(&ids_path, e))?,
     );
     let mut fr =
         BufReader::with_capacity(1 << 20, File::open(fp).map_err(|e| BuildError::io(fp, e))?);
+    // Per-chunk counting sort: counts of the leaves this chunk touches (reset after
+    // each chunk through `touched`, so the cost is per face, not per leaf).
+    let mut in_chunk = vec![0u32; leaves.len()];
+    let mut touched: Vec<u32> = Vec::new();
+    let mut grouped: Vec<[u32; 3]> = Vec::new();
     let mut done = 0u64;
     while done < faces {
         let n = ((faces - done) as usize).min(chunk);
-        let k: Vec<u64> = read_chunk(&mut kr, n, keys)?;
+        let ids: Vec<u32> = read_chunk(&mut ir, n, &ids_path)?;
         let f: Vec<[u32; 3]> = read_chunk(&mut fr, n, fp)?;
-        let mut order: Vec<(u32, u32)> = k
-            .par_iter()
-            .enumerate()
-            .map(|(i, &key)| (find(key) as u32, i as u32))
-            .collect();
-        order.par_sort_unstable();
-        let mut i = 0;
-        while i < order.len() {
-            let leaf = order[i].0 as usize;
-            let mut run: Vec<[u32; 3]> = Vec::new();
-            while i < order.len() && order[i].0 as usize == leaf {
-                run.push(f[order[i].1 as usize]);
-                i += 1;
+        for &id in &ids {
+            if in_chunk[id as usize] == 0 {
+                touched.push(id);
             }
-            file.write_all_at(bytemuck::cast_slice(&run), cursor[leaf] * 12)
-                .map_err(|e| BuildError::io(out, e))?;
-            cursor[leaf] += run.len() as u64;
+            in_chunk[id as usize] += 1;
         }
+        touched.sort_unstable();
+        // `in_chunk` becomes each touched leaf's next slot in `grouped`.
+        let mut at = 0u32;
+        for &id in &touched {
+            let c = in_chunk[id as usize];
+            in_chunk[id as usize] = at;
+            at += c;
+        }
+        grouped.clear();
+        grouped.resize(n, [0; 3]);
+        for (&id, face) in ids.iter().zip(&f) {
+            let slot = &mut in_chunk[id as usize];
+            grouped[*slot as usize] = *face;
+            *slot += 1;
+        }
+        // Each touched leaf's run now ends at its slot; runs are in leaf order.
+        let mut start = 0usize;
+        for &id in &touched {
+            let end = in_chunk[id as usize] as usize;
+            let leaf = id as usize;
+            file.write_all_at(bytemuck::cast_slice(&grouped[start..end]), cursor[leaf] * 12)
+                .map_err(|e| BuildError::io(out, e))?;
+            cursor[leaf] += (end - start) as u64;
+            in_chunk[leaf] = 0;
+            start = end;
+        }
+        touched.clear();
         done += n as u64;
         progress.advance(n as u64);
         if progress.cancelled() {
@@ -726,6 +757,7 @@ fn route(
         }
     }
     progress.finish_stage();
+    let _ = std::fs::remove_file(&ids_path);
     let cap = opts.leaf_triangles as u64;
     let oversized = leaves.iter().filter(|l| l.face_count > cap).count() as u64;
     leaves.retain(|l| l.face_count > 0);
