@@ -529,6 +529,14 @@ fn encode_morph(positions: &[[u32; 3]], targets: &[[u32; 3]]) -> Vec<u8> {
         }
     }
     survivors.sort_unstable();
+    // Where each position's run of survivors starts in `survivors` (a hash lookup per
+    // moving vertex instead of two binary searches, which were most of the encoder's
+    // own time).
+    let mut first: rustc_hash::FxHashMap<[u32; 3], u32> =
+        rustc_hash::FxHashMap::with_capacity_and_hasher(survivors.len(), Default::default());
+    for (i, s) in survivors.iter().enumerate().rev() {
+        first.insert(s.0, i as u32);
+    }
     let mut codes = Vec::with_capacity(positions.len() + 4);
     codes.extend_from_slice(&[0; 4]);
     let mut explicit: Vec<[u32; 3]> = Vec::new();
@@ -538,8 +546,8 @@ fn encode_morph(positions: &[[u32; 3]], targets: &[[u32; 3]]) -> Vec<u8> {
             before += 1;
             MORPH_STAYS
         } else {
-            let lo = survivors.partition_point(|s| s.0 < *t);
-            let hi = lo + survivors[lo..].partition_point(|s| s.0 == *t);
+            let lo = first.get(t).map_or(survivors.len(), |&i| i as usize);
+            let hi = lo + survivors[lo..].iter().take_while(|s| s.0 == *t).count();
             // Among survivors at the target, the rank closest to this vertex.
             let best = survivors[lo..hi]
                 .iter()
