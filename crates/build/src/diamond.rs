@@ -5,7 +5,7 @@
 //! back into the diamond's tetrahedra.
 
 use crate::bounds::Sphere;
-use crate::patch::{Welder, WorkPatch, WorkVertex};
+use crate::patch::{WorkPatch, WorkVertex};
 use rustc_hash::FxHashMap;
 
 /// Tuning of the simplifier.
@@ -32,23 +32,64 @@ pub struct Merged {
     pub indices: Vec<u32>,
     /// For each child, for each of its vertices, the merged index.
     pub child_maps: Vec<Vec<u32>>,
+    /// Position id of every merged vertex (see [`position_ids`]).
+    pub pid: Vec<u32>,
 }
 
-/// Weld the children into one mesh (bit-identical vertices are the same vertex).
+/// Weld the children into one mesh (bit-identical vertices are the same vertex), and
+/// number the distinct positions on the way: one hash lookup per child vertex, keyed by
+/// position, with the few vertices sharing a position (attribute seams) chained.
 pub fn merge(children: &[&WorkPatch]) -> Merged {
+    const END: u32 = u32::MAX;
     let total: usize = children.iter().map(|c| c.vertices.len()).sum();
-    let mut w = Welder::with_capacity(total);
+    let mut by_pos: FxHashMap<[u32; 3], u32> =
+        FxHashMap::with_capacity_and_hasher(total, Default::default());
+    // Per position id its first merged vertex; per merged vertex the next one at the
+    // same position.
+    let mut first: Vec<u32> = Vec::with_capacity(total);
+    let mut next: Vec<u32> = Vec::with_capacity(total);
+    let mut vertices: Vec<WorkVertex> = Vec::with_capacity(total);
+    let mut pid: Vec<u32> = Vec::with_capacity(total);
     let mut indices = Vec::with_capacity(children.iter().map(|c| c.indices.len()).sum());
     let mut child_maps = Vec::with_capacity(children.len());
     for c in children {
-        let map: Vec<u32> = c.vertices.iter().map(|v| w.add(v)).collect();
+        let map: Vec<u32> = c
+            .vertices
+            .iter()
+            .map(|v| {
+                let new = vertices.len() as u32;
+                let p = *by_pos.entry(v.q).or_insert_with(|| {
+                    first.push(END);
+                    first.len() as u32 - 1
+                });
+                let mut at = first[p as usize];
+                let mut last = END;
+                while at != END {
+                    if vertices[at as usize].key() == v.key() {
+                        return at;
+                    }
+                    last = at;
+                    at = next[at as usize];
+                }
+                if last == END {
+                    first[p as usize] = new;
+                } else {
+                    next[last as usize] = new;
+                }
+                vertices.push(*v);
+                next.push(END);
+                pid.push(p);
+                new
+            })
+            .collect();
         indices.extend(c.indices.iter().map(|&i| map[i as usize]));
         child_maps.push(map);
     }
     Merged {
-        vertices: w.vertices,
+        vertices,
         indices,
         child_maps,
+        pid,
     }
 }
 
@@ -251,7 +292,9 @@ pub fn repair(vertices: &[WorkVertex], pid: &[u32], indices: &mut Vec<u32>) -> R
         FxHashMap::with_capacity_and_hasher(indices.len(), Default::default());
     for tri in indices.chunks_exact(3) {
         for k in 0..3 {
-            *uses.entry(edge_key(p(tri[k]), p(tri[(k + 1) % 3]))).or_default() += 1;
+            *uses
+                .entry(edge_key(p(tri[k]), p(tri[(k + 1) % 3])))
+                .or_default() += 1;
         }
     }
     let border = |a: u32, b: u32| uses.get(&edge_key(p(a), p(b))) == Some(&1);
@@ -508,7 +551,8 @@ mod tests {
         let b = grid_patch(10, 100);
         let m = merge(&[&a, &b]);
         assert_eq!(m.vertices.len(), 2 * 121 - 11);
-        let locks = border_locks(&position_ids(&m.vertices), &m.indices);
+        assert_eq!(m.pid, position_ids(&m.vertices));
+        let locks = border_locks(&m.pid, &m.indices);
         // Only the outer rectangle is locked: 2*(20+10) border vertices.
         assert_eq!(locks.iter().filter(|&&l| l).count(), 60);
     }
@@ -571,7 +615,10 @@ mod tests {
         // The same ear next to a border vertex D is left alone: flipping would make a
         // triangle with three border corners.
         let mut idx = vec![a, c, b, a, b, d];
-        assert_eq!(repair(&verts[..4], &position_ids(&verts[..4]), &mut idx).flipped, 0);
+        assert_eq!(
+            repair(&verts[..4], &position_ids(&verts[..4]), &mut idx).flipped,
+            0
+        );
         let mut folded = vec![0u32, 1, 3, 0, 3, 1, 1, 2, 3];
         let r = repair(&verts, &position_ids(&verts), &mut folded);
         assert_eq!(r.folded_pairs_removed, 1);

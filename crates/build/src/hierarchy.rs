@@ -10,7 +10,9 @@ use crate::bounds::Sphere;
 use crate::diamond::{self, SimplifyConfig};
 use crate::import::Imported;
 use crate::partition::{parent_id, read_leaf_faces, tet_id, Leaf, Partition, TetId};
-use crate::patch::{grid_to_local, CacheOrder, remove_bad_triangles, Welder, WorkPatch, WorkVertex};
+use crate::patch::{
+    grid_to_local, remove_bad_triangles, CacheOrder, Welder, WorkPatch, WorkVertex,
+};
 use crate::timing::{Phase, Phases};
 use crate::{BuildError, BuildOptions, BuildReport, Progress};
 use rayon::prelude::*;
@@ -271,8 +273,7 @@ impl Ctx<'_> {
         let refs: Vec<&WorkPatch> = kids.iter().map(|k| &k.1).collect();
         let merged = diamond::merge(&refs);
         lap.mark(Phase::Merge);
-        let pid = diamond::position_ids(&merged.vertices);
-        let locks = diamond::border_locks(&pid, &merged.indices);
+        let locks = diamond::border_locks(&merged.pid, &merged.indices);
         lap.mark(Phase::BorderLocks);
         let target: usize = per_tet_tris
             .iter()
@@ -280,7 +281,7 @@ impl Ctx<'_> {
             .sum();
         let (mut simplified, err_grid) = diamond::simplify(&merged, &locks, target, &self.cfg);
         lap.mark(Phase::Simplify);
-        let fixed = diamond::repair(&merged.vertices, &pid, &mut simplified);
+        let fixed = diamond::repair(&merged.vertices, &merged.pid, &mut simplified);
         lap.mark(Phase::Repair);
         self.repaired.fetch_add(
             fixed.flipped + fixed.folded_pairs_removed,

@@ -216,7 +216,10 @@ pub fn import(input: &Path, tmp: &Path, progress: &dyn Progress) -> Result<Impor
         return Err(BuildError::EmptyInput(input.to_path_buf()));
     }
     let normals_computed = !attributes.normals;
-    tracing::info!(seconds = parse_started.elapsed().as_secs_f64(), "import: parsed");
+    tracing::info!(
+        seconds = parse_started.elapsed().as_secs_f64(),
+        "import: parsed"
+    );
     if !normals_computed {
         normalise_given_normals(&vpath)?;
     }
@@ -318,7 +321,10 @@ pub fn compute_normals(
         map.flush().map_err(|e| BuildError::io(&npath, e))?;
         release_mut(&map);
     }
-    tracing::info!(seconds = started.elapsed().as_secs_f64(), "normals computed");
+    tracing::info!(
+        seconds = started.elapsed().as_secs_f64(),
+        "normals computed"
+    );
     RecordStore::open(&npath)
 }
 

@@ -420,7 +420,9 @@ fn deepen_keys(
                     let mut loc = Locator::new(deep, 3);
                     for (key, t) in ks.iter_mut().zip(fs) {
                         if crowded.contains(&prefix(*key, shallow)) {
-                            *key = loc.locate(grid.centroid3(t.map(|i| qs.get(i)))).unwrap_or(*key);
+                            *key = loc
+                                .locate(grid.centroid3(t.map(|i| qs.get(i))))
+                                .unwrap_or(*key);
                         }
                     }
                 });
@@ -471,7 +473,10 @@ fn write_keys(
                 let mut loc = Locator::new(depth, 3);
                 faces
                     .iter()
-                    .map(move |t| loc.locate(grid.centroid3(t.map(|i| qs.get(i)))).unwrap_or(0))
+                    .map(move |t| {
+                        loc.locate(grid.centroid3(t.map(|i| qs.get(i))))
+                            .unwrap_or(0)
+                    })
                     .collect::<Vec<_>>()
             })
             .collect();
@@ -559,7 +564,10 @@ fn choose_splits(
                 }
             }
             if d > from {
-                let mut up: HashMap<u64, u64> = HashMap::with_capacity_and_hasher(level_counts.len() / 2 + 1, Default::default());
+                let mut up: HashMap<u64, u64> = HashMap::with_capacity_and_hasher(
+                    level_counts.len() / 2 + 1,
+                    Default::default(),
+                );
                 for (p, c) in level_counts {
                     *up.entry(p >> 1).or_default() += c;
                 }
@@ -743,8 +751,11 @@ fn route(
         for &id in &touched {
             let end = in_chunk[id as usize] as usize;
             let leaf = id as usize;
-            file.write_all_at(bytemuck::cast_slice(&grouped[start..end]), cursor[leaf] * 12)
-                .map_err(|e| BuildError::io(out, e))?;
+            file.write_all_at(
+                bytemuck::cast_slice(&grouped[start..end]),
+                cursor[leaf] * 12,
+            )
+            .map_err(|e| BuildError::io(out, e))?;
             cursor[leaf] += (end - start) as u64;
             in_chunk[leaf] = 0;
             start = end;

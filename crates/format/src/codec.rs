@@ -790,8 +790,8 @@ pub fn decode_patch(
 
     let stored = &bytes[PATCH_HEADER_BYTES..];
     let payload: Cow<[u8]> = if flags & PATCH_FLAG_ZSTD != 0 {
-        let out = zstd_decompress(stored, raw_len as usize)
-            .map_err(|e| corrupt(format!("zstd: {e}")))?;
+        let out =
+            zstd_decompress(stored, raw_len as usize).map_err(|e| corrupt(format!("zstd: {e}")))?;
         Cow::Owned(out)
     } else {
         Cow::Borrowed(stored)
