@@ -110,13 +110,34 @@ impl Ctx<'_> {
     }
 
     fn quantized(&self, v: u32) -> WorkVertex {
-        let s = self.imp.vertices.get(v);
-        WorkVertex {
-            q: self.part.grid.quantize(s.position),
-            normal: self.imp.normal(v, &s),
-            color: s.color,
-            uv: s.uv,
+        let q = self.part.quantized.get(v);
+        match &self.imp.normals {
+            // Computed normals and nothing else per vertex: the full 36-byte record is
+            // not needed (the importer's defaults stand for the absent attributes).
+            Some(normals) if !self.imp.attributes.colors && !self.imp.attributes.uvs => {
+                WorkVertex {
+                    q,
+                    normal: normals.get(v),
+                    color: tessera_mesh::Vertex::default().color,
+                    uv: tessera_mesh::Vertex::default().uv,
+                }
+            }
+            _ => {
+                let s = self.imp.vertices.get(v);
+                WorkVertex {
+                    q,
+                    normal: self.imp.normal(v, &s),
+                    color: s.color,
+                    uv: s.uv,
+                }
+            }
         }
+    }
+
+    /// Releases the resident pages of every memory-mapped store.
+    fn release(&self) {
+        self.imp.release();
+        self.part.quantized.release();
     }
 
     /// A leaf's patch from its bucket: weld, clean, optimise.
@@ -148,7 +169,7 @@ impl Ctx<'_> {
             + local.len() as u64;
         if loaded / RELEASE_EVERY_VERTICES != (loaded - local.len() as u64) / RELEASE_EVERY_VERTICES
         {
-            self.imp.release();
+            self.release();
         }
         let far2 = w
             .vertices
@@ -470,7 +491,7 @@ pub(crate) fn build_hierarchy(
             progress.advance(1);
             r
         })?;
-        imp.release();
+        ctx.release();
         tracing::info!(
             level,
             diamonds = diamonds.len(),

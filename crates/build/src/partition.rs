@@ -128,6 +128,8 @@ pub struct Leaf {
 /// The result of stage 2.
 pub struct Partition {
     pub grid: Grid,
+    /// Every input vertex's grid position (the leaves read theirs from it).
+    pub quantized: QuantStore,
     /// Every tetrahedron that is split (has children), conforming.
     pub split: HashSet<TetId>,
     /// Non-empty leaves, in depth-first order.
@@ -282,11 +284,10 @@ pub fn partition(
         peak_rss_mib = crate::peak_rss_mib(),
         "partition: routing"
     );
-    drop(qs);
-    let _ = std::fs::remove_file(&qpath);
     let _ = std::fs::remove_file(&keys_path);
     Ok(Partition {
         grid,
+        quantized: qs,
         split,
         leaves,
         buckets,
