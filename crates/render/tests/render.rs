@@ -368,11 +368,13 @@ fn bunny() -> PathBuf {
 /// Tolerance, and what set it: repeated lavapipe renders are bit-identical, and the same
 /// frames through llvmpipe on GL (`WGPU_BACKEND=gl`) differ from the lavapipe goldens by
 /// at most 1 level per channel (PSNR 92.7-97 dB). The slack is for other rasterisers and
-/// Mesa versions, which round triangle edges differently: PSNR >= 45 dB and at most
-/// 0.1% of the pixels (76) off by more than 16 levels. A cut one step coarser already
-/// fails: camera 1 at 2 px gave 46.2 dB but 82 pixels off; at 4 px (the negative control
-/// at the end, which must fail) 35.6 dB and 850 pixels. `TESSERA_UPDATE_GOLDEN=1`
-/// rewrites the images.
+/// Mesa versions, which round triangle edges differently: PSNR >= 50 dB and at most
+/// 0.05% of the pixels (38) off by more than 16 levels. A cut one step coarser fails:
+/// camera 1 at 2 px (the negative control at the end) gives 47.5 dB and 69 pixels off;
+/// at 4 px 35.7 dB and 1018 pixels. (Before the builder's leaf order changed, 2 px gave
+/// 46.2 dB and 82 pixels, and the tolerance was 45 dB and 0.1%, which 2 px now passes.)
+/// A builder change that moves the simplified meshes changes the frames too: regenerate
+/// with `TESSERA_UPDATE_GOLDEN=1` and look at the images.
 #[test]
 fn bunny_golden_images() {
     let b = build(Some(&bunny()), 0, &BuildOptions::default());
@@ -404,6 +406,7 @@ fn bunny_golden_images() {
             .expect("camera")
         })
         .collect();
+    const MIN_PSNR: f64 = 50.0;
     let golden = |i: usize| golden_dir().join(format!("bunny_{i}.png"));
     // (PSNR, pixels off by more than 16, allowed pixels)
     let compare = |img: &Image, i: usize| {
@@ -412,7 +415,7 @@ fn bunny_golden_images() {
         let p = psnr(img, &g).expect("same size");
         let (off, max) = diff_stats(img, &g, 16).expect("same size");
         eprintln!("camera {i}: PSNR {p:.2} dB, {off} pixels off by > 16 (max {max})");
-        (p, off, (img.width * img.height) as usize / 1000)
+        (p, off, (img.width * img.height) as usize / 2000)
     };
     let update = std::env::var_os("TESSERA_UPDATE_GOLDEN").is_some();
     let mut v = viewer(1.0);
@@ -425,11 +428,11 @@ fn bunny_golden_images() {
             continue;
         }
         let (p, off, allowed) = compare(&img, i);
-        if p < 45.0 || off > allowed {
+        if p < MIN_PSNR || off > allowed {
             let _ = img.save_png(&std::env::temp_dir().join(format!("bunny_{i}_actual.png")));
         }
         assert!(
-            p >= 45.0,
+            p >= MIN_PSNR,
             "camera {i}: PSNR {p:.1} dB against the golden image"
         );
         assert!(
@@ -437,13 +440,13 @@ fn bunny_golden_images() {
             "camera {i}: {off} pixels differ by more than 16, allowed {allowed}"
         );
     }
-    // Negative control: a coarser cut must fail the same comparison.
-    let mut coarse = viewer(4.0);
+    // Negative control: the next coarser cut must fail the same comparison.
+    let mut coarse = viewer(2.0);
     coarse.render(&cameras[1]).expect("render");
     let (p, off, allowed) = compare(&coarse.read_image().expect("read"), 1);
     assert!(
-        p < 45.0 || off > allowed,
-        "a 4 px cut passed as the 1 px golden image"
+        p < MIN_PSNR || off > allowed,
+        "a 2 px cut passed as the 1 px golden image"
     );
 }
 
