@@ -705,8 +705,16 @@ fn read_vertex_generic<D: Decoder, R: Read>(
 #[inline(always)]
 fn make_vertex(vals: &[f64; SLOTS]) -> Vertex {
     let f = |i: usize| vals[i] as f32;
-    // `as u8` saturates (and maps NaN to 0).
-    let c = |i: usize| vals[i].round() as u8;
+    // Round half up; `as u8` saturates, negative values and NaN give 0. (Not
+    // `f64::round`, a libm call on baseline x86-64, four times per vertex.)
+    let c = |i: usize| {
+        let v = vals[i];
+        if v >= 0.0 {
+            (v + 0.5) as u8
+        } else {
+            0
+        }
+    };
     Vertex {
         position: [f(0), f(1), f(2)],
         normal: [f(3), f(4), f(5)],
@@ -756,7 +764,10 @@ fn index_error<R: Read>(cx: &Ctx<'_, R>, face: u64, index: i64, vertex_count: u6
 /// Check one index value against the vertex count.
 #[inline(always)]
 fn checked_index(x: f64, vertex_count: u64) -> Result<u32, ReadErr> {
-    if x >= 0.0 && x < vertex_count as f64 && x.fract() == 0.0 {
+    // Integral exactly when the truncated value converts back to it (`f64::fract` is a
+    // libm call on baseline x86-64; this runs for every corner). `vertex_count` is at
+    // most 2^32, so the cast is exact for every index in range.
+    if x >= 0.0 && x < vertex_count as f64 && (x as u32) as f64 == x {
         Ok(x as u32)
     } else {
         Err(ReadErr::BadIndex(x as i64))
