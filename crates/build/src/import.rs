@@ -98,6 +98,12 @@ impl<T: Pod> RecordStore<T> {
     /// Record `i` (the caller has validated indices at import).
     #[inline]
     pub fn get(&self, i: u32) -> T {
+        self.get_at(i as u64)
+    }
+
+    /// Record `i` of a store that may hold more than 2^32 records (faces).
+    #[inline]
+    pub fn get_at(&self, i: u64) -> T {
         let b = self.map.as_deref().unwrap_or(&[]);
         let size = std::mem::size_of::<T>();
         let o = i as usize * size;
