@@ -68,14 +68,9 @@ impl WorkPatch {
         let ic = u32::from_le_bytes(b.get(4..8)?.try_into().ok()?) as usize;
         let vb = b.get(8..8 + vc * 36)?;
         let ib = b.get(8 + vc * 36..8 + vc * 36 + ic * 4)?;
-        let vertices = vb
-            .chunks_exact(36)
-            .map(bytemuck::pod_read_unaligned)
-            .collect();
-        let indices = ib
-            .chunks_exact(4)
-            .map(bytemuck::pod_read_unaligned)
-            .collect();
+        // One copy each (the buffer need not be aligned for the element types).
+        let vertices = bytemuck::pod_collect_to_vec(vb);
+        let indices = bytemuck::pod_collect_to_vec(ib);
         Some(WorkPatch { vertices, indices })
     }
 
