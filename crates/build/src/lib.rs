@@ -250,26 +250,25 @@ fn build_in_pool(
     report.import = imported.report.clone();
     report.normals_computed = imported.normals_computed;
     lap("import", &mut report);
-    // Normals (when the input has none) are computed on their own thread beside the
-    // partition: it reads only positions, and the normals are first needed by the
-    // hierarchy.
+    // Normals (when the input has none) are computed as a task of the worker pool beside
+    // the partition (`rayon::join`, so `--threads` still bounds the threads): the
+    // partition reads only positions, and the normals are first needed by the hierarchy.
     let failed = std::sync::atomic::AtomicBool::new(false);
     let stop = || progress.cancelled() || failed.load(std::sync::atomic::Ordering::Relaxed);
-    let (part, normals) = std::thread::scope(|s| {
-        let imp = &imported;
-        let normals = imp
-            .normals_computed
-            .then(|| s.spawn(|| import::compute_normals(imp, tmp.path(), &stop)));
-        let part = partition::partition(imp, tmp.path(), opts, progress);
-        if part.is_err() {
-            failed.store(true, std::sync::atomic::Ordering::Relaxed);
-        }
-        let normals = normals.map(|h| {
-            h.join()
-                .unwrap_or_else(|_| Err(BuildError::Internal("normals thread panicked".into())))
-        });
-        (part, normals)
-    });
+    let imp = &imported;
+    let (part, normals) = rayon::join(
+        || {
+            let part = partition::partition(imp, tmp.path(), opts, progress);
+            if part.is_err() {
+                failed.store(true, std::sync::atomic::Ordering::Relaxed);
+            }
+            part
+        },
+        || {
+            imp.normals_computed
+                .then(|| import::compute_normals(imp, tmp.path(), &stop))
+        },
+    );
     let part = part?;
     if let Some(n) = normals {
         imported.normals = Some(n?);
