@@ -277,7 +277,9 @@ pub fn repair(vertices: &[WorkVertex], pid: &[u32], indices: &mut Vec<u32>) -> R
             counts.folded_pairs_removed += 1;
         }
     }
-    drop_marked(indices, &drop, counts.folded_pairs_removed > 0);
+    if counts.folded_pairs_removed > 0 {
+        drop_marked(indices, &drop);
+    }
     // Ears: directed edge (vertex indices) -> triangle.
     let directed = |a: u32, b: u32| ((a as u64) << 32) | b as u64;
     let mut edge: FxHashMap<u64, usize> =
@@ -390,11 +392,8 @@ pub fn repair(vertices: &[WorkVertex], pid: &[u32], indices: &mut Vec<u32>) -> R
     counts
 }
 
-/// Remove the triangles marked in `drop` (when `any`), keeping the others in order.
-fn drop_marked(indices: &mut Vec<u32>, drop: &[bool], any: bool) {
-    if !any {
-        return;
-    }
+/// Remove the triangles marked in `drop`, keeping the others in order.
+fn drop_marked(indices: &mut Vec<u32>, drop: &[bool]) {
     let mut t = 0;
     indices.retain(|_| {
         let keep = !drop[t / 3];

@@ -182,20 +182,19 @@ fn release_every_samples(n: usize, release: impl FnOnce()) {
 
 /// Mean edge length of the sampled faces.
 fn mean_edge_length(imp: &Imported, sample: &[[u32; 3]]) -> f64 {
-    let (mut sum, mut n) = (0.0f64, 0u64);
-    for t in sample {
+    let mut sum = 0.0f64;
+    for (n, t) in sample.iter().enumerate() {
         let p = t.map(|i| imp.vertices.get(i).position.map(|c| c as f64));
         for k in 0..3 {
             sum += crate::bounds::dist2(p[k], p[(k + 1) % 3]).sqrt();
         }
-        n += 3;
-        release_every_samples(n as usize / 3 - 1, || imp.vertices.release());
+        release_every_samples(n, || imp.vertices.release());
     }
     imp.vertices.release();
-    if n > 0 {
-        sum / n as f64
-    } else {
+    if sample.is_empty() {
         0.0
+    } else {
+        sum / (3 * sample.len()) as f64
     }
 }
 

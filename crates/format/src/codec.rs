@@ -205,13 +205,11 @@ thread_local! {
 fn zstd_compress(raw: &[u8]) -> std::io::Result<Vec<u8>> {
     ZSTD_C.with(|c| {
         let mut c = c.borrow_mut();
-        if c.is_none() {
-            *c = Some(zstd::bulk::Compressor::new(ZSTD_LEVEL)?);
-        }
-        match c.as_mut() {
-            Some(c) => c.compress(raw),
-            None => zstd::bulk::compress(raw, ZSTD_LEVEL),
-        }
+        let c = match &mut *c {
+            Some(c) => c,
+            slot @ None => slot.insert(zstd::bulk::Compressor::new(ZSTD_LEVEL)?),
+        };
+        c.compress(raw)
     })
 }
 
@@ -219,13 +217,11 @@ fn zstd_compress(raw: &[u8]) -> std::io::Result<Vec<u8>> {
 fn zstd_decompress(stored: &[u8], capacity: usize) -> std::io::Result<Vec<u8>> {
     ZSTD_D.with(|d| {
         let mut d = d.borrow_mut();
-        if d.is_none() {
-            *d = Some(zstd::bulk::Decompressor::new()?);
-        }
-        match d.as_mut() {
-            Some(d) => d.decompress(stored, capacity),
-            None => zstd::bulk::decompress(stored, capacity),
-        }
+        let d = match &mut *d {
+            Some(d) => d,
+            slot @ None => slot.insert(zstd::bulk::Decompressor::new()?),
+        };
+        d.decompress(stored, capacity)
     })
 }
 

@@ -193,15 +193,14 @@ pub fn read_input(path: &Path) -> InputMesh {
     m
 }
 
-/// The builder's quantisation, recomputed from the header:
-/// `q = round((p - cube_origin) / cube_size * 2^quant_bits)`, clamped into the grid.
+/// The builder's quantisation (its own `Grid::quantize`) on the grid the header records.
 pub fn quantize(h: &Header, p: [f32; 3]) -> [u32; 3] {
-    let n = (h.quant_bits as f64).exp2();
-    std::array::from_fn(|i| {
-        ((f64::from(p[i]) - h.cube_origin[i]) / h.cube_size * n)
-            .round()
-            .clamp(0.0, n) as u32
-    })
+    tessera_build::partition::Grid {
+        origin: h.cube_origin,
+        size: h.cube_size,
+        bits: h.quant_bits,
+    }
+    .quantize(p)
 }
 
 /// A triangle of grid points rotated so that its smallest corner comes first
