@@ -15,6 +15,20 @@ use tessera_select::{Camera, Orbit};
 /// Background of the pinhole tests: pure magenta, which the lit clay never produces.
 const MAGENTA: [f64; 4] = [1.0, 0.0, 1.0, 1.0];
 
+/// A viewer drawing complete frames at `tolerance_px` on the magenta background.
+fn complete_viewer(model: &Arc<Model>, tolerance_px: f32) -> Viewer {
+    Viewer::new(
+        model.clone(),
+        ViewerOptions {
+            tolerance_px,
+            mode: Mode::Complete,
+            background: MAGENTA,
+            ..Default::default()
+        },
+    )
+    .expect("viewer (is lavapipe installed? apt-get install mesa-vulkan-drivers)")
+}
+
 fn small_options() -> BuildOptions {
     BuildOptions {
         memory_bytes: 256 << 20,
@@ -90,16 +104,7 @@ fn no_pinholes_at_any_tolerance_complete_frames() {
     let b = build(None, 60_000, &small_options());
     let cams = outside_cameras(b.model.header().bounding_sphere, 320, 240, 6);
     for tol in [0.5f32, 1.0, 2.0, 4.0, 8.0, 32.0] {
-        let mut v = Viewer::new(
-            b.model.clone(),
-            ViewerOptions {
-                tolerance_px: tol,
-                mode: Mode::Complete,
-                background: MAGENTA,
-                ..Default::default()
-            },
-        )
-        .expect("viewer (is lavapipe installed? apt-get install mesa-vulkan-drivers)");
+        let mut v = complete_viewer(&b.model, tol);
         for (i, cam) in cams.iter().enumerate() {
             let s = v.render(cam).expect("render");
             let img = v.read_image().expect("read");
@@ -225,15 +230,7 @@ fn frames_never_wait_for_slow_reads() {
     )
     .expect("viewer");
     let cam = &outside_cameras(bounds, 320, 240, 1)[0];
-    let mut reference = Viewer::new(
-        b.model.clone(),
-        ViewerOptions {
-            mode: Mode::Complete,
-            background: MAGENTA,
-            ..Default::default()
-        },
-    )
-    .expect("viewer");
+    let mut reference = complete_viewer(&b.model, 1.0);
     let full = reference.render(cam).expect("render");
     let t = Instant::now();
     let mut last = None;
@@ -473,15 +470,7 @@ fn vertex_colours_are_drawn() {
         ..Default::default()
     })
     .expect("camera");
-    let mut v = Viewer::new(
-        b.model.clone(),
-        ViewerOptions {
-            mode: Mode::Complete,
-            background: MAGENTA,
-            ..Default::default()
-        },
-    )
-    .expect("viewer");
+    let mut v = complete_viewer(&b.model, 1.0);
     v.render(&cam).expect("render");
     let img = v.read_image().expect("read");
     // Hue of the lit pixels: the clay colour has r > g > b with fixed ratios; the scan's
