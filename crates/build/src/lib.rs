@@ -12,6 +12,9 @@
 //!    destinations, split into the parent tetrahedra; saturate errors and spheres.
 //! 4. Write the model atomically through `tessera_format`.
 //!
+//! [`verify`] checks a finished model: the format's structural checks plus the forest's
+//! geometric rules (diamonds), which need `tessera-tetra`.
+//!
 //! Peak memory is bounded by the chunk sizes derived from [`BuildOptions::memory_bytes`]
 //! and by the working set of the diamonds in flight, not by the input size.
 
@@ -22,6 +25,7 @@ pub mod import;
 pub mod partition;
 pub mod patch;
 mod timing;
+pub mod verify;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;

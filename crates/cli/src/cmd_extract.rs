@@ -2,22 +2,20 @@
 //!
 //! The cut is chosen exactly as every other consumer chooses it (top down, saturated
 //! errors, `tessera_select::select_cut`), or is the uniform cut at one level. The selected
-//! patches are decoded, merged into one indexed mesh by welding bit-identical vertices
-//! (positions share one global grid, so border vertices shared by two patches are
-//! identical), and written as a binary PLY in model coordinates. The edge report of the
-//! written mesh (boundary and non-manifold edges) is printed: on a closed input any cut
-//! must be a closed manifold, so this doubles as the crack check.
+//! patches are decoded and merged into one indexed mesh by welding bit-identical vertices
+//! (`tessera_select::extract_nodes`: positions share one global grid, so border vertices
+//! shared by two patches are identical), and written as a binary PLY in model coordinates
+//! (`tessera_select::write_cut_ply`). The edge report of the written mesh (boundary and
+//! non-manifold edges) is printed: on a closed input any cut must be a closed manifold, so
+//! this doubles as the crack check.
 
 use anyhow::{bail, Context};
-use rayon::prelude::*;
 use serde_json::json;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::ExitCode;
-use tessera_format::{Model, PatchData};
-use tessera_mesh::{Attributes, PlyWriter, PlyWriterOptions, Vertex};
+use tessera_format::Model;
 use tessera_select::{
-    edge_report, merge_patches, select_cut, uniform_level_cut, Camera, Criterion, CutMesh,
-    EdgeReport, PatchRef,
+    extract_nodes, select_cut, uniform_level_cut, write_cut_ply, Camera, Criterion,
 };
 
 #[derive(clap::Args)]
@@ -55,16 +53,6 @@ pub struct Args {
     /// Print the summary as JSON on stdout.
     #[arg(long)]
     json: bool,
-}
-
-/// A selected, decoded and merged cut.
-pub struct Extracted {
-    /// Selected node indices.
-    pub nodes: Vec<u32>,
-    /// The merged mesh (grid positions).
-    pub mesh: CutMesh,
-    /// Edge counts of `mesh`.
-    pub edges: EdgeReport,
 }
 
 /// Chooses the node indices of a cut. `level` is checked against the model.
@@ -115,93 +103,20 @@ fn select(m: &Model, a: &Args) -> anyhow::Result<(Vec<u32>, serde_json::Value)> 
     ))
 }
 
-/// Decodes the patches of `nodes` (in parallel) and merges them into one mesh. A patch
-/// that fails its checksum or does not decode fails the whole extraction, naming the node.
-pub fn extract_nodes(m: &Model, nodes: &[u32]) -> anyhow::Result<Extracted> {
-    let patches: Vec<PatchData> = nodes
-        .par_iter()
-        // The format error names the node ("patch checksum mismatch for node 12 ...").
-        .map(|&i| {
-            m.decode_patch(i as usize)
-                .with_context(|| format!("{}", m.path().display()))
-        })
-        .collect::<anyhow::Result<_>>()?;
-    let mesh = merge_patches(patches.iter().map(|p| PatchRef {
-        positions: &p.positions,
-        normals: &p.normals,
-        colors: &p.colors,
-        uvs: &p.uvs,
-        indices: &p.indices,
-    }));
-    drop(patches);
-    let edges = edge_report(&mesh.indices, &mesh.positions);
-    Ok(Extracted {
-        nodes: nodes.to_vec(),
-        mesh,
-        edges,
-    })
-}
-
-/// Writes a merged cut as a binary PLY in model coordinates (atomic).
-fn write_ply(m: &Model, mesh: &CutMesh, path: &Path, comments: Vec<String>) -> anyhow::Result<()> {
-    let attributes = Attributes {
-        normals: !mesh.normals.is_empty(),
-        colors: !mesh.colors.is_empty(),
-        uvs: !mesh.uvs.is_empty(),
-    };
-    let opts = PlyWriterOptions {
-        attributes,
-        vertex_count: mesh.positions.len() as u64,
-        face_count: mesh.triangle_count() as u64,
-        comments,
-    };
-    let mut w = PlyWriter::create(path, &opts)?;
-    for (i, &q) in mesh.positions.iter().enumerate() {
-        let p = m.model_position(q);
-        let mut v = Vertex {
-            position: [p[0] as f32, p[1] as f32, p[2] as f32],
-            ..Vertex::default()
-        };
-        if attributes.normals {
-            v.normal = mesh.normals[i];
-        }
-        if attributes.colors {
-            v.color = mesh.colors[i];
-        }
-        if attributes.uvs {
-            v.uv = mesh.uvs[i];
-        }
-        w.write_vertex(&v)?;
-    }
-    for t in mesh.indices.chunks_exact(3) {
-        w.write_triangle([t[0], t[1], t[2]])?;
-    }
-    w.finish()?;
-    Ok(())
-}
-
 pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     let m = Model::open(&a.model).with_context(|| format!("{}", a.model.display()))?;
     let (nodes, criterion) = select(&m, &a)?;
-    let x = extract_nodes(&m, &nodes)?;
+    // The format error names the node ("patch checksum mismatch for node 12 ...").
+    let x = extract_nodes(&m, &nodes).with_context(|| format!("{}", m.path().display()))?;
     let comments = vec![
         format!("tessera extract of {}", a.model.display()),
         format!("cut {criterion}, {} nodes", x.nodes.len()),
     ];
-    write_ply(&m, &x.mesh, &a.output, comments)
+    write_cut_ply(&m, &x.mesh, &a.output, comments)
         .with_context(|| format!("writing {}", a.output.display()))?;
 
-    let all = m.nodes();
-    let max_node_error = x
-        .nodes
-        .iter()
-        .map(|&i| all[i as usize].error)
-        .fold(0.0f32, f32::max);
-    let (lmin, lmax) = x
-        .nodes
-        .iter()
-        .map(|&i| all[i as usize].level)
-        .fold((u8::MAX, 0u8), |(lo, hi), l| (lo.min(l), hi.max(l)));
+    let max_node_error = x.max_node_error(&m);
+    let levels = x.level_range(&m);
     let e = &x.edges;
     if a.json {
         let j = json!({
@@ -211,7 +126,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
             "nodes": x.nodes.len(),
             "triangles": x.mesh.triangle_count(),
             "vertices": x.mesh.positions.len(),
-            "levels": if x.nodes.is_empty() { serde_json::Value::Null } else { json!({ "min": lmin, "max": lmax }) },
+            "levels": levels.map(|(min, max)| json!({ "min": min, "max": max })),
             "max_node_error": max_node_error,
             "edges": {
                 "total": e.edges,
@@ -225,13 +140,12 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     } else {
         println!("wrote {}", a.output.display());
         println!("  cut        {criterion}");
-        if x.nodes.is_empty() {
-            println!("  nodes      0 (everything culled)");
-        } else {
-            println!(
+        match levels {
+            None => println!("  nodes      0 (everything culled)"),
+            Some((lmin, lmax)) => println!(
                 "  nodes      {} (levels {lmin}..={lmax}, largest error {max_node_error:.4e})",
                 x.nodes.len()
-            );
+            ),
         }
         println!(
             "  mesh       {} triangles, {} vertices",

@@ -1,9 +1,11 @@
 //! Cut selection for Tessera: which patches of a model to draw for a camera.
 //!
-//! Pure CPU, no GPU, no threads, no I/O besides reading a camera file. Depends only on
-//! the node records of `tessera-format` ([`tessera_format::Header`],
+//! Pure CPU, no GPU. Selection uses no threads and no I/O besides reading a camera file,
+//! and depends only on the node records of `tessera-format` ([`tessera_format::Header`],
 //! [`tessera_format::NodeRecord`]), so it runs on a memory-mapped node table, on a table
-//! fetched over HTTP, or on hand-built arrays in tests.
+//! fetched over HTTP, or on hand-built arrays in tests. Only `extract` (feature
+//! `extract`, off by default) reads patches (through [`tessera_format::Model`], in
+//! parallel) and writes a file (a PLY, through `tessera-mesh`).
 //!
 //! - [`camera`]: the shared camera and its JSON format (`docs/camera.md`), view matrix
 //!   and frustum in a model's local frame.
@@ -14,9 +16,13 @@
 //!   ([`should_unload`]) on a compact [`NodeView`] of the node table.
 //! - [`merge`]: welding the decoded patches of a cut into one mesh ([`merge_patches`]).
 //! - [`edges`]: edge-use counts of a mesh ([`edge_report`]), the crack detector.
+//! - `extract` (feature `extract`): a chosen cut decoded, merged and edge-checked as one
+//!   mesh (`extract_nodes`), written as a PLY in model coordinates (`write_cut_ply`).
 
 pub mod camera;
 pub mod edges;
+#[cfg(feature = "extract")]
+pub mod extract;
 mod hash;
 pub mod merge;
 pub mod residency;
@@ -24,6 +30,8 @@ pub mod select;
 
 pub use camera::{Camera, CameraError, CameraErrorKind, Frustum, Orbit, ViewBasis, CAMERA_FIELDS};
 pub use edges::{edge_report, EdgeReport};
+#[cfg(feature = "extract")]
+pub use extract::{extract_nodes, write_cut_ply, Extracted};
 pub use merge::{merge_patches, CutMesh, PatchRef};
 pub use residency::{
     predict_camera, prefetch_set, select_resident, should_unload, HotNode, NodeView,
