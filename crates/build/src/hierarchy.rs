@@ -9,7 +9,7 @@
 use crate::bounds::Sphere;
 use crate::diamond::{self, SimplifyConfig};
 use crate::import::Imported;
-use crate::partition::{parent_id, read_leaf_faces, tet_id, Leaf, Partition, TetId};
+use crate::partition::{centroid3, parent_id, read_leaf_faces, tet_id, Leaf, Partition, TetId};
 use crate::patch::{
     grid_to_local, remove_bad_triangles, CacheOrder, Welder, WorkPatch, WorkVertex,
 };
@@ -337,7 +337,7 @@ impl Ctx<'_> {
         let keys: Vec<u64> = tets.iter().map(|t| t.dfs_key()).collect();
         let mut loc = Locator::new(level, 3);
         let owner = |q: [[u32; 3]; 3]| -> usize {
-            let c = grid.centroid3(q);
+            let c = centroid3(&grid, q);
             if let Some(k) = loc.locate(c) {
                 if let Some(i) = keys.iter().position(|&m| m == k) {
                     return i;
@@ -603,7 +603,7 @@ fn finalize(
         // Two valid spheres around the full-resolution geometry, the smaller wins: the
         // ball of the leaves' balls, and the bounding box's centre with the farthest
         // leaf vertex. Plus the quantisation error, so it holds the input vertices too.
-        let qerr = grid.size / (grid.bits as f64).exp2() * 0.5 * 3f64.sqrt();
+        let qerr = grid.max_error();
         let mut s = Sphere::of_balls(&leaf_balls);
         let far = f64::from_bits(ctx.leaf_far2.load(Ordering::Relaxed)).sqrt();
         if far.is_finite() && far < s.radius {
@@ -643,7 +643,7 @@ fn finalize(
     report.quant_bits = grid.bits;
     report.mean_edge = ctx.part.mean_edge;
     report.quant_step = grid.step();
-    report.quant_error_max = grid.step() * 3f64.sqrt() / 2.0;
+    report.quant_error_max = grid.max_error();
     report.output_bytes = std::fs::metadata(output)
         .map_err(|e| BuildError::io(output, e))?
         .len();

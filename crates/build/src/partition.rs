@@ -20,53 +20,14 @@ use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
 use tessera_tetra::{dfs_key, dfs_range, Locator, Tet, CUBE_BITS, MAX_LEVEL};
 
-/// The global quantisation grid: `2^bits` cells along each edge of the bounding cube.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Grid {
-    pub origin: [f64; 3],
-    pub size: f64,
-    pub bits: u32,
-}
+/// The global quantisation grid: `2^bits` cells along each edge of the bounding cube (the
+/// format's [`tessera_format::Grid`], re-exported here where the partition makes it).
+pub use tessera_format::Grid;
 
-impl Grid {
-    /// The cube around a bounding box: min corner at the box's min, edge = longest side.
-    pub fn new(min: [f64; 3], max: [f64; 3], bits: u32) -> Grid {
-        let ext = (0..3).map(|i| max[i] - min[i]).fold(0.0, f64::max);
-        let size = if ext > 0.0 && ext.is_finite() {
-            ext
-        } else {
-            1.0
-        };
-        Grid {
-            origin: min,
-            size,
-            bits,
-        }
-    }
-
-    /// Model units per grid step.
-    pub fn step(&self) -> f64 {
-        self.size / (1u64 << self.bits) as f64
-    }
-
-    /// Nearest grid point, clamped into `[0, 2^bits]`.
-    pub fn quantize(&self, p: [f32; 3]) -> [u32; 3] {
-        let n = (1u64 << self.bits) as f64;
-        let cells_per_unit = n / self.size;
-        std::array::from_fn(|i| {
-            let t = (p[i] as f64 - self.origin[i]) * cells_per_unit;
-            // Round half up by truncation after clamping (non-negative, so truncation is
-            // floor): `f64::round` is a libm call on baseline x86-64, and this runs for
-            // every corner of every triangle.
-            (t.clamp(0.0, n) + 0.5) as u32
-        })
-    }
-
-    /// 3x the centroid of a triangle in tetra lattice units (use with scale 3).
-    pub fn centroid3(&self, q: [[u32; 3]; 3]) -> [i64; 3] {
-        let shift = CUBE_BITS - self.bits;
-        std::array::from_fn(|i| (q[0][i] as i64 + q[1][i] as i64 + q[2][i] as i64) << shift)
-    }
+/// 3x the centroid of a triangle of grid points in tetra lattice units (use with scale 3).
+pub fn centroid3(grid: &Grid, q: [[u32; 3]; 3]) -> [i64; 3] {
+    let shift = CUBE_BITS - grid.bits;
+    std::array::from_fn(|i| (q[0][i] as i64 + q[1][i] as i64 + q[2][i] as i64) << shift)
 }
 
 /// Every input vertex's grid position (12 bytes each), in a memory-mapped temporary
@@ -319,7 +280,7 @@ fn key_depths(
     let mut loc = Locator::new(limit, 3);
     let mut keys: Vec<u64> = Vec::with_capacity(sample.len());
     for (n, t) in sample.iter().enumerate() {
-        keys.extend(loc.locate(grid.centroid3(t.map(|i| qs.get(i)))));
+        keys.extend(loc.locate(centroid3(grid, t.map(|i| qs.get(i)))));
         release_every_samples(n, || qs.release());
     }
     qs.release();
@@ -425,7 +386,7 @@ fn deepen_keys(
                     for (key, t) in ks.iter_mut().zip(fs) {
                         if crowded.contains(&prefix(*key, shallow)) {
                             *key = loc
-                                .locate(grid.centroid3(t.map(|i| qs.get(i))))
+                                .locate(centroid3(grid, t.map(|i| qs.get(i))))
                                 .unwrap_or(*key);
                         }
                     }
@@ -478,7 +439,7 @@ fn write_keys(
                 faces
                     .iter()
                     .map(move |t| {
-                        loc.locate(grid.centroid3(t.map(|i| qs.get(i))))
+                        loc.locate(centroid3(grid, t.map(|i| qs.get(i))))
                             .unwrap_or(0)
                     })
                     .collect::<Vec<_>>()
@@ -893,7 +854,7 @@ mod tests {
             max_level = max_level.max(leaf.id.1);
             for f in faces {
                 let q = f.map(|i| part.grid.quantize(imp.vertices.get(i).position));
-                let t = Tet::locate_scaled(part.grid.centroid3(q), 3, leaf.id.1).unwrap();
+                let t = Tet::locate_scaled(centroid3(&part.grid, q), 3, leaf.id.1).unwrap();
                 assert_eq!(tet_id(&t), leaf.id, "face {f:?} routed to the wrong leaf");
             }
         }
@@ -902,13 +863,5 @@ mod tests {
             max_level > part.key_depth.min(60) / 2,
             "want deep leaves, got {max_level}"
         );
-    }
-
-    #[test]
-    fn quantize_clamps_and_rounds() {
-        let g = Grid::new([0.0; 3], [2.0, 1.0, 1.0], 4);
-        assert_eq!(g.quantize([0.0, 0.0, 0.0]), [0, 0, 0]);
-        assert_eq!(g.quantize([2.0, 1.0, 5.0]), [16, 8, 16]);
-        assert_eq!(g.quantize([0.06, 0.07, -1.0]), [0, 1, 0]);
     }
 }

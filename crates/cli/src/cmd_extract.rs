@@ -13,7 +13,7 @@ use anyhow::{bail, Context};
 use serde_json::json;
 use std::path::PathBuf;
 use std::process::ExitCode;
-use tessera_format::Model;
+use tessera_format::{Grid, Model};
 use tessera_select::{
     extract_nodes, select_cut, uniform_level_cut, write_cut_ply, Camera, Criterion,
 };
@@ -112,7 +112,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         format!("tessera extract of {}", a.model.display()),
         format!("cut {criterion}, {} nodes", x.nodes.len()),
     ];
-    write_cut_ply(&m, &x.mesh, &a.output, comments)
+    write_cut_ply(&Grid::of_header(m.header()), &x.mesh, &a.output, comments)
         .with_context(|| format!("writing {}", a.output.display()))?;
 
     let max_node_error = x.max_node_error(&m);

@@ -4,7 +4,7 @@ use anyhow::Context;
 use serde_json::json;
 use std::path::PathBuf;
 use std::process::ExitCode;
-use tessera_format::{Model, ATTR_COLORS, ATTR_NORMALS, ATTR_UVS, NODE_FLAG_LEAF};
+use tessera_format::{Grid, Model, ATTR_COLORS, ATTR_NORMALS, ATTR_UVS, NODE_FLAG_LEAF};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -45,7 +45,7 @@ pub fn info_json(m: &Model) -> serde_json::Value {
     if h.attributes & ATTR_UVS != 0 {
         attrs.push("uvs");
     }
-    let step = m.quant_step();
+    let grid = Grid::of_header(h);
     let node_table = h.node_count * 128;
     json!({
         "file": m.path().display().to_string(),
@@ -62,7 +62,7 @@ pub fn info_json(m: &Model) -> serde_json::Value {
         "triangles": tris,
         "leaf_triangles": leaf_tris,
         "error": { "min_internal": if min_err.is_finite() { min_err } else { 0.0 }, "max": h.max_error },
-        "quantization": { "bits": h.quant_bits, "step": step, "max_error": step * 3f64.sqrt() / 2.0 },
+        "quantization": { "bits": h.quant_bits, "step": grid.step(), "max_error": grid.max_error() },
         "cube": { "origin": h.cube_origin, "size": h.cube_size },
         "bounding_sphere": { "center": &h.bounding_sphere[..3], "radius": h.bounding_sphere[3] },
         "bytes": { "header": 256, "node_table": node_table, "patches": h.patch_data_bytes },
@@ -80,6 +80,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         return Ok(ExitCode::SUCCESS);
     }
     let h = m.header();
+    let grid = Grid::of_header(h);
     println!(
         "{}  (format v{}, {} bytes)",
         a.model.display(),
@@ -116,8 +117,8 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     println!(
         "  quantization    {} bits, step {:.4e}, max error {:.4e}",
         h.quant_bits,
-        m.quant_step(),
-        m.quant_step() * 3f64.sqrt() / 2.0
+        grid.step(),
+        grid.max_error()
     );
     println!(
         "  bounding sphere center [{:.6}, {:.6}, {:.6}] radius {:.6}",

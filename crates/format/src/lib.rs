@@ -11,6 +11,7 @@
 
 mod codec;
 mod error;
+mod grid;
 mod reader;
 mod records;
 mod verify;
@@ -21,6 +22,7 @@ pub use codec::{
     MAX_PATCH_VERTICES, PATCH_CODEC_VERSION, PATCH_FLAG_MORPH, PATCH_FLAG_ZSTD, PATCH_HEADER_BYTES,
 };
 pub use error::FormatError;
+pub use grid::Grid;
 pub use reader::Model;
 pub use records::{
     Header, NodeRecord, ATTR_COLORS, ATTR_NORMALS, ATTR_UVS, FORMAT_VERSION, MAGIC, NODE_FLAG_LEAF,

@@ -4,6 +4,7 @@
 //! this is what `tessera verify` and the builder's tests run.
 
 use crate::codec::PatchData;
+use crate::grid::Grid;
 use crate::reader::Model;
 use crate::records::{NodeRecord, NODE_FLAG_LEAF, NO_NODE};
 
@@ -55,7 +56,7 @@ pub fn verify_structure(model: &Model) -> VerifyReport {
     let mut r = VerifyReport::default();
     let h = model.header();
     let nodes = model.nodes();
-    let step = model.quant_step();
+    let step = Grid::of_header(h).step();
     let eps = h.cube_size * 1e-5;
     let grid_max = 1u64 << h.quant_bits.min(32);
     let roots = h.root_count as usize;

@@ -10,7 +10,7 @@
 
 use rayon::prelude::*;
 use std::path::Path;
-use tessera_format::{FormatError, Model, NodeRecord, PatchData};
+use tessera_format::{FormatError, Grid, Model, NodeRecord, PatchData};
 use tessera_mesh::{Attributes, MeshError, PlyWriter, PlyWriterOptions, Vertex};
 
 use crate::{edge_report, merge_patches, CutMesh, EdgeReport, PatchRef};
@@ -69,10 +69,11 @@ pub fn extract_nodes(m: &Model, nodes: &[u32]) -> Result<Extracted, FormatError>
     })
 }
 
-/// Writes a merged cut of `m` as a binary PLY in model coordinates, atomically (nothing
-/// appears at `path` unless the whole file was written). `comments` go into the header.
+/// Writes a merged cut as a binary PLY in model coordinates (grid points through `grid`,
+/// the model's [`Grid::of_header`]), atomically: nothing appears at `path` unless the
+/// whole file was written. `comments` go into the header.
 pub fn write_cut_ply(
-    m: &Model,
+    grid: &Grid,
     mesh: &CutMesh,
     path: &Path,
     comments: Vec<String>,
@@ -90,7 +91,7 @@ pub fn write_cut_ply(
     };
     let mut w = PlyWriter::create(path, &opts)?;
     for (i, &q) in mesh.positions.iter().enumerate() {
-        let p = m.model_position(q);
+        let p = grid.position(q);
         let mut v = Vertex {
             position: [p[0] as f32, p[1] as f32, p[2] as f32],
             ..Vertex::default()
