@@ -3,7 +3,11 @@
 //!
 //! Everything that reads or writes a model goes through this crate; `docs/format.md` is
 //! the byte-level manual and must stay true to the structs below. This crate knows
-//! nothing of GPUs or thread policies.
+//! nothing of GPUs or thread policies, and its reader does no I/O of its own: a
+//! [`ModelIndex`] is parsed from bytes and patches are decoded from bytes, which come
+//! from a [`ByteSource`]. Features: `mmap` (default) adds the memory-mapped local
+//! [`Model`] and `verify_structure`; `write` (default) the atomic writer. Without them
+//! the crate builds for `wasm32-unknown-unknown`.
 //!
 //! Layout: [`Header`] (256 bytes) | node table (`node_count` x [`NodeRecord`], 128 bytes
 //! each, ordered by level then Morton code of the tetrahedron centre) | patch data (one
@@ -12,9 +16,13 @@
 mod codec;
 mod error;
 mod grid;
+mod index;
+#[cfg(feature = "mmap")]
 mod reader;
 mod records;
+#[cfg(feature = "mmap")]
 mod verify;
+#[cfg(feature = "write")]
 mod writer;
 
 pub use codec::{
@@ -23,10 +31,14 @@ pub use codec::{
 };
 pub use error::FormatError;
 pub use grid::Grid;
-pub use reader::Model;
+pub use index::{ByteSource, ModelIndex, HEADER_BYTES, NODE_BYTES};
+#[cfg(feature = "mmap")]
+pub use reader::{MappedFile, Model};
 pub use records::{
-    Header, NodeRecord, ATTR_COLORS, ATTR_NORMALS, ATTR_UVS, FORMAT_VERSION, MAGIC, NODE_FLAG_LEAF,
-    NO_NODE,
+    header_crc32, Header, NodeRecord, ATTR_COLORS, ATTR_NORMALS, ATTR_UVS, FORMAT_VERSION, MAGIC,
+    NODE_FLAG_LEAF, NO_NODE,
 };
+#[cfg(feature = "mmap")]
 pub use verify::{verify_structure, VerifyReport, MAX_PROBLEM_MESSAGES};
-pub use writer::{header_crc32, write_model, PatchSpool, SpooledPatch};
+#[cfg(feature = "write")]
+pub use writer::{write_model, PatchSpool, SpooledPatch};

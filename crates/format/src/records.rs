@@ -128,3 +128,11 @@ pub struct NodeRecord {
 
 const _: () = assert!(std::mem::size_of::<Header>() == 256);
 const _: () = assert!(std::mem::size_of::<NodeRecord>() == 128);
+
+/// Computes the header checksum: CRC-32 of the 256 header bytes with `header_crc32`
+/// set to zero.
+pub fn header_crc32(header: &Header) -> u32 {
+    let mut h = *header;
+    h.header_crc32 = 0;
+    crc32fast::hash(bytemuck::bytes_of(&h))
+}

@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use crate::error::FormatError;
-use crate::records::{Header, NodeRecord, FORMAT_VERSION, MAGIC};
+use crate::records::{header_crc32, Header, NodeRecord, FORMAT_VERSION, MAGIC};
 
 /// Where one patch lies in a [`PatchSpool`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -183,14 +183,6 @@ impl Drop for TempGuard {
             let _ = std::fs::remove_file(&self.path);
         }
     }
-}
-
-/// Computes the header checksum: CRC-32 of the 256 header bytes with `header_crc32`
-/// set to zero.
-pub fn header_crc32(header: &Header) -> u32 {
-    let mut h = *header;
-    h.header_crc32 = 0;
-    crc32fast::hash(bytemuck::bytes_of(&h))
 }
 
 /// Writes a complete model file atomically.

@@ -1,50 +1,51 @@
-//! Asynchronous paging of model patches: the frame never waits on disk.
+//! Asynchronous paging of model patches from a local file: the frame never waits on
+//! disk. A [`Pager`] is the memory-mapped [`PatchSource`] of `tessera-stream`.
 //!
 //! Following GoLD §4.1 (asynchronous paging), the render thread only ever *asks* for
-//! patches and *looks* at what is already in RAM; reading, CRC checking and decoding
-//! happen on loader threads. A [`Pager`] owns:
+//! patches and *collects* finished ones; reading, CRC checking and decoding happen on
+//! loader threads. A [`Pager`] owns:
 //!
 //! - a priority queue of wanted nodes, replaced wholesale by every [`Pager::request`]
-//!   (so stale wants from earlier frames are dropped);
+//!   (so stale wants from earlier frames are cancelled);
 //! - loader thread(s) that pop the highest-priority node, read + decode it with
-//!   [`Model::decode_patch`] and hand the result back;
-//! - a RAM budget over decoded patch sizes with LRU eviction that never evicts nodes
-//!   [`Pager::pin`]ned for the current frame (see [`cache`]);
-//! - an event list drained by [`Pager::poll`].
+//!   [`Model::decode_patch`] and publish the result;
+//! - the list of answers drained by [`Pager::poll`].
+//!
+//! Which patches stay in RAM, and for how long, is the streaming core's decision
+//! (`tessera_stream::Scheduler` keeps decoded patches in its RAM cache); the pager
+//! holds a patch only between decoding it and the next poll.
 //!
 //! All public calls take one short-held mutex and never do I/O (except
-//! [`Pager::advise`], which only issues `madvise(WILLNEED)` hints), so they return in
-//! microseconds even while a loader sits in a slow read.
+//! [`Pager::advise`], which only issues `madvise(WILLNEED)` hints, and
+//! [`PatchSource::read_now`], which is meant to block), so they return in microseconds
+//! even while a loader sits in a slow read.
 //!
 //! # Priorities
 //! Larger priority loads first. The pager has no notion of visibility: a caller that
 //! wants "visible nodes first, then prefetch" gives visible nodes priorities above all
-//! prefetch priorities (e.g. `1e6 + screen_error` vs `screen_error`), and may call
-//! [`Pager::advise`] on the prefetch set so the kernel starts reading it ahead.
+//! prefetch priorities (e.g. `1e6 + screen_error` vs `screen_error`).
 //!
 //! # Failures
 //! A patch that fails to read or decode (bad CRC, truncated file, bad node index) is
-//! reported once as [`Event::Failed`] and remembered: later requests skip it, so it is
+//! answered once as [`Answer::Failed`] and remembered: later requests skip it, so it is
 //! never retried in a loop. The caller keeps drawing its parent.
 
-pub mod cache;
 mod loader;
 
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
+use rayon::prelude::*;
 use rustc_hash::FxHashSet;
-use tessera_format::{Model, PatchData};
+use tessera_format::Model;
+use tessera_stream::{Answer, PatchSource};
 
 use crate::loader::{Queued, Shared, State};
 
 /// Pager configuration.
 #[derive(Clone, Debug)]
 pub struct PagerOptions {
-    /// RAM budget in bytes, counted as decoded patch sizes ([`cache::decoded_bytes`]).
-    /// Default 256 MiB.
-    pub ram_budget_bytes: u64,
     /// Number of loader threads (at least 1 is used). Default 1.
     pub threads: usize,
     /// Test hook: sleep this long before every patch read, to simulate a slow disk.
@@ -54,45 +55,26 @@ pub struct PagerOptions {
 impl Default for PagerOptions {
     fn default() -> Self {
         PagerOptions {
-            ram_budget_bytes: 256 << 20,
             threads: 1,
             read_delay: None,
         }
     }
 }
 
-/// Something that happened on a loader thread, reported by [`Pager::poll`].
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub enum Event {
-    /// The node's patch is resident; `bytes` is its decoded size.
-    Loaded { node: u32, bytes: u64 },
-    /// The node's patch could not be loaded; it will not be retried.
-    Failed { node: u32, error: String },
-}
-
 /// Counters and gauges, see [`Pager::stats`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct PagerStats {
-    /// Decoded bytes of resident patches.
-    pub resident_bytes: u64,
-    /// Number of resident patches.
-    pub resident_patches: usize,
-    /// Requests still queued (not yet picked up by a loader).
-    pub pending: usize,
-    /// Patches loaded successfully (including ones then refused for lack of room).
+    /// Requests queued and not yet picked up by a loader.
+    pub queued: usize,
+    /// Requests a loader is reading now.
+    pub in_flight: usize,
+    /// Patches loaded successfully.
     pub loads: u64,
-    /// Patches evicted to stay within the budget.
-    pub evictions: u64,
     /// Patches that failed to load.
     pub failures: u64,
-    /// [`Pager::get`] calls that found the patch resident.
-    pub hits: u64,
-    /// [`Pager::get`] calls that did not.
-    pub misses: u64,
 }
 
-/// Loads patches of one model on background threads under a RAM budget.
-/// See the crate docs.
+/// Loads patches of one model on background threads. See the crate docs.
 pub struct Pager {
     shared: Arc<Shared>,
     threads: Vec<JoinHandle<()>>,
@@ -104,7 +86,7 @@ impl Pager {
         let shared = Arc::new(Shared {
             model,
             read_delay: opts.read_delay,
-            state: Mutex::new(State::new(opts.ram_budget_bytes)),
+            state: Mutex::new(State::default()),
             wake: Condvar::new(),
         });
         let n = opts.threads.max(1);
@@ -119,11 +101,7 @@ impl Pager {
                 Err(e) => tracing::error!(thread = i, error = %e, "cannot spawn loader thread"),
             }
         }
-        tracing::debug!(
-            threads = threads.len(),
-            budget = opts.ram_budget_bytes,
-            "pager started"
-        );
+        tracing::debug!(threads = threads.len(), "pager started");
         Pager { shared, threads }
     }
 
@@ -132,16 +110,16 @@ impl Pager {
     }
 
     /// Replaces the pending queue with `wanted` (node, priority; larger priority loads
-    /// first). Nodes already resident, in flight, or known to fail are skipped, as are
-    /// duplicates (the first occurrence wins). Never blocks on I/O.
+    /// first). Nodes in flight, answered and not yet polled, or known to fail are
+    /// skipped, as are duplicates (the first occurrence wins). Never blocks on I/O.
     pub fn request(&self, wanted: &[(u32, f32)]) {
         let mut st = self.state();
         st.queue.clear();
         let mut seen = FxHashSet::default();
         for &(node, priority) in wanted {
             if !seen.insert(node)
-                || st.cache.contains(node)
                 || st.in_flight.contains(&node)
+                || st.answered.contains(&node)
                 || st.failed.contains(&node)
             {
                 continue;
@@ -160,56 +138,33 @@ impl Pager {
     }
 
     /// Kernel read-ahead hints (`madvise(WILLNEED)`) for a prefetch set: cheap, reads
-    /// nothing. Resident nodes are skipped.
+    /// nothing.
     pub fn advise(&self, nodes: &[u32]) {
-        let todo: Vec<u32> = {
-            let st = self.state();
-            nodes
-                .iter()
-                .copied()
-                .filter(|&n| !st.cache.contains(n))
-                .collect()
-        };
-        for n in todo {
+        for &n in nodes {
             self.shared.model.advise_willneed(n as usize);
         }
     }
 
-    /// Marks `nodes` as drawn this frame: they will not be evicted until the next
-    /// `pin` call replaces the set.
-    pub fn pin(&self, nodes: &[u32]) {
-        self.state().cache.set_pinned(nodes);
-    }
-
-    /// The resident patch of `node`, marking it most recently used.
-    pub fn get(&self, node: u32) -> Option<Arc<PatchData>> {
+    /// Moves the answers finished since the last call into `out`.
+    pub fn poll_into(&self, out: &mut Vec<Answer>) {
         let mut st = self.state();
-        let got = st.cache.touch(node);
-        if got.is_some() {
-            st.stats.hits += 1;
-        } else {
-            st.stats.misses += 1;
-        }
-        got
+        st.answered.clear();
+        out.append(&mut st.done);
     }
 
-    /// Whether `node`'s patch is resident (does not count as a use).
-    pub fn is_resident(&self, node: u32) -> bool {
-        self.state().cache.contains(node)
-    }
-
-    /// Drains the events since the last call.
-    pub fn poll(&self) -> Vec<Event> {
-        std::mem::take(&mut self.state().events)
+    /// The answers finished since the last call.
+    pub fn poll(&self) -> Vec<Answer> {
+        let mut out = Vec::new();
+        self.poll_into(&mut out);
+        out
     }
 
     /// Current counters.
     pub fn stats(&self) -> PagerStats {
         let st = self.state();
         PagerStats {
-            resident_bytes: st.cache.resident_bytes(),
-            resident_patches: st.cache.len(),
-            pending: st.queue.len(),
+            queued: st.queue.len(),
+            in_flight: st.in_flight.len(),
             ..st.stats
         }
     }
@@ -217,6 +172,35 @@ impl Pager {
     /// The model being paged.
     pub fn model(&self) -> &Arc<Model> {
         &self.shared.model
+    }
+
+    /// Reads and decodes `nodes` now on the calling thread and rayon's pool (offline
+    /// frames), in the order given.
+    pub fn read_blocking(&self, nodes: &[u32]) -> Vec<Answer> {
+        let model = &self.shared.model;
+        nodes
+            .par_iter()
+            .map(|&node| Answer::from_result(node, model.decode_patch(node as usize)))
+            .collect()
+    }
+}
+
+impl PatchSource for Pager {
+    fn request(&mut self, wanted: &[(u32, f32)]) {
+        Pager::request(self, wanted);
+    }
+    fn poll(&mut self, out: &mut Vec<Answer>) {
+        self.poll_into(out);
+    }
+    fn pending(&self) -> usize {
+        let s = self.stats();
+        s.queued + s.in_flight
+    }
+    fn hint(&mut self, nodes: &[u32]) {
+        self.advise(nodes);
+    }
+    fn read_now(&mut self, nodes: &[u32]) -> Option<Vec<Answer>> {
+        Some(self.read_blocking(nodes))
     }
 }
 

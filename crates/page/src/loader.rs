@@ -11,9 +11,9 @@ use std::time::{Duration, Instant};
 
 use rustc_hash::FxHashSet;
 use tessera_format::Model;
+use tessera_stream::Answer;
 
-use crate::cache::{decoded_bytes, Cache};
-use crate::{Event, PagerStats};
+use crate::PagerStats;
 
 /// One queued request: larger priority first, then earlier in the request slice.
 #[derive(Debug)]
@@ -43,28 +43,16 @@ impl Ord for Queued {
 }
 
 /// Everything behind the pager's mutex.
+#[derive(Default)]
 pub(crate) struct State {
     pub queue: BinaryHeap<Queued>,
     pub in_flight: FxHashSet<u32>,
+    /// Nodes of `done` (not polled yet): not queued again.
+    pub answered: FxHashSet<u32>,
     pub failed: FxHashSet<u32>,
-    pub cache: Cache,
-    pub events: Vec<Event>,
+    pub done: Vec<Answer>,
     pub stats: PagerStats,
     pub shutdown: bool,
-}
-
-impl State {
-    pub fn new(budget: u64) -> State {
-        State {
-            queue: BinaryHeap::new(),
-            in_flight: FxHashSet::default(),
-            failed: FxHashSet::default(),
-            cache: Cache::new(budget),
-            events: Vec::new(),
-            stats: PagerStats::default(),
-            shutdown: false,
-        }
-    }
 }
 
 pub(crate) struct Shared {
@@ -129,28 +117,14 @@ pub(crate) fn run(shared: &Shared) {
         let result = shared.model.decode_patch(node as usize);
         let mut st = shared.lock();
         st.in_flight.remove(&node);
-        match result {
-            Ok(patch) => {
-                let bytes = decoded_bytes(&patch);
-                st.stats.loads += 1;
-                let admit = st.cache.admit(node, Arc::new(patch), bytes);
-                st.stats.evictions += admit.evicted.len() as u64;
-                if admit.admitted {
-                    tracing::trace!(node, bytes, evicted = admit.evicted.len(), "patch loaded");
-                    st.events.push(Event::Loaded { node, bytes });
-                } else {
-                    tracing::debug!(node, bytes, "patch refused: budget full of pinned patches");
-                }
-            }
-            Err(e) => {
-                tracing::warn!(node, error = %e, "patch failed to load");
-                st.stats.failures += 1;
-                st.failed.insert(node);
-                st.events.push(Event::Failed {
-                    node,
-                    error: e.to_string(),
-                });
-            }
+        st.answered.insert(node);
+        if let Err(e) = &result {
+            tracing::warn!(node, error = %e, "patch failed to load");
+            st.stats.failures += 1;
+            st.failed.insert(node);
+        } else {
+            st.stats.loads += 1;
         }
+        st.done.push(Answer::from_result(node, result));
     }
 }

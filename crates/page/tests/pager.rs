@@ -5,7 +5,8 @@ use std::sync::{Arc, OnceLock};
 use std::time::{Duration, Instant};
 
 use tessera_format::Model;
-use tessera_page::{cache::decoded_bytes, Event, Pager, PagerOptions};
+use tessera_page::{Pager, PagerOptions};
+use tessera_stream::{Answer, PatchSource};
 
 /// Builds the shared test model once per test binary.
 fn model_path() -> &'static Path {
@@ -43,7 +44,7 @@ fn open() -> Arc<Model> {
 }
 
 /// Polls until `done(events so far)` or a 60 s timeout; returns all events.
-fn wait(p: &Pager, mut done: impl FnMut(&[Event]) -> bool) -> Vec<Event> {
+fn wait(p: &Pager, mut done: impl FnMut(&[Answer]) -> bool) -> Vec<Answer> {
     let start = Instant::now();
     let mut all = Vec::new();
     loop {
@@ -78,28 +79,28 @@ fn loads_everything_and_matches_decode() {
     let wanted: Vec<(u32, f32)> = all_nodes(&m).into_iter().map(|i| (i, 1.0)).collect();
     p.request(&wanted);
     let ev = wait(&p, |e| e.len() == n);
-    assert!(ev.iter().all(|e| matches!(e, Event::Loaded { .. })));
-    for i in 0..n as u32 {
-        let got = p.get(i).expect("resident");
-        let want = m.decode_patch(i as usize).unwrap();
-        assert_eq!(*got, want, "node {i}");
-        assert!(ev.contains(&Event::Loaded {
-            node: i,
-            bytes: decoded_bytes(&want)
-        }));
+    let mut seen = vec![false; n];
+    for a in &ev {
+        let Answer::Loaded { node, patch } = a else {
+            panic!("unexpected {a:?}");
+        };
+        assert!(!seen[*node as usize], "node {node} answered twice");
+        seen[*node as usize] = true;
+        assert_eq!(**patch, m.decode_patch(*node as usize).unwrap(), "node {node}");
     }
     let s = p.stats();
-    assert_eq!(s.resident_patches, n);
-    assert_eq!(s.loads, n as u64);
-    assert_eq!(
-        (s.hits, s.misses, s.evictions, s.failures, s.pending),
-        (n as u64, 0, 0, 0, 0)
-    );
-    // Re-requesting resident nodes queues nothing.
-    p.request(&wanted);
-    assert_eq!(p.stats().pending, 0);
-    assert!(p.get(u32::MAX).is_none());
-    assert_eq!(p.stats().misses, 1);
+    assert_eq!((s.loads, s.failures, s.queued, s.in_flight), (n as u64, 0, 0, 0));
+    // Blocking reads answer in the order asked, with the same patches.
+    let order: Vec<u32> = (0..n as u32).rev().collect();
+    let now = p.read_blocking(&order);
+    for (a, &want) in now.iter().zip(&order) {
+        let Answer::Loaded { node, patch } = a else {
+            panic!("unexpected {a:?}");
+        };
+        assert_eq!(*node, want);
+        assert_eq!(**patch, m.decode_patch(want as usize).unwrap());
+    }
+    assert!(matches!(p.read_blocking(&[u32::MAX])[0], Answer::Failed { .. }));
 }
 
 #[test]
@@ -126,78 +127,11 @@ fn higher_priority_loads_first() {
     let order: Vec<u32> = ev
         .iter()
         .map(|e| match e {
-            Event::Loaded { node, .. } => *node,
+            Answer::Loaded { node, .. } => *node,
             other => panic!("unexpected {other:?}"),
         })
         .collect();
     assert_eq!(order, vec![7, 2, 1, 3, 5]);
-}
-
-#[test]
-fn budget_respected_and_pins_kept() {
-    let m = open();
-    let n = m.nodes().len();
-    let sizes: Vec<u64> = (0..n)
-        .map(|i| decoded_bytes(&m.decode_patch(i).unwrap()))
-        .collect();
-    let total: u64 = sizes.iter().sum();
-    let largest = *sizes.iter().max().unwrap();
-    let budget = total / 3;
-    let p = Pager::new(
-        m.clone(),
-        PagerOptions {
-            ram_budget_bytes: budget,
-            threads: 2,
-            ..Default::default()
-        },
-    );
-    // Load a small pinned set first.
-    let mut pinned = Vec::new();
-    let mut acc = 0;
-    for i in 0..n as u32 {
-        if acc + sizes[i as usize] > budget / 4 {
-            break;
-        }
-        acc += sizes[i as usize];
-        pinned.push(i);
-    }
-    assert!(!pinned.is_empty());
-    p.request(&pinned.iter().map(|&i| (i, 1.0)).collect::<Vec<_>>());
-    wait(&p, |e| e.len() == pinned.len());
-    p.pin(&pinned);
-    // Then everything else, checking the budget as loads come in.
-    let rest: Vec<(u32, f32)> = (0..n as u32)
-        .filter(|i| !pinned.contains(i))
-        .map(|i| (i, i as f32))
-        .collect();
-    p.request(&rest);
-    let mut seen = 0;
-    wait(&p, |e| {
-        seen = e.len();
-        let s = p.stats();
-        assert!(
-            s.resident_bytes <= budget + largest,
-            "{s:?} budget {budget}"
-        );
-        seen == rest.len()
-    });
-    let s = p.stats();
-    assert!(s.evictions > 0, "{s:?}");
-    assert!(s.resident_bytes <= budget + largest);
-    assert_eq!(s.loads, n as u64);
-    for &i in &pinned {
-        assert!(p.is_resident(i), "pinned node {i} was evicted");
-    }
-    // Unpinning lets them go under pressure: request the evicted ones again.
-    p.pin(&[]);
-    let evicted: Vec<(u32, f32)> = (0..n as u32)
-        .filter(|&i| !p.is_resident(i))
-        .map(|i| (i, 1.0))
-        .collect();
-    p.request(&evicted);
-    wait(&p, |e| e.len() == evicted.len());
-    assert!(p.stats().resident_bytes <= budget + largest);
-    assert!(pinned.iter().any(|&i| !p.is_resident(i)));
 }
 
 #[test]
@@ -222,11 +156,9 @@ fn frame_never_waits_on_slow_disk() {
         let t = Instant::now();
         p.request(&wanted);
         worst = worst.max(t.elapsed());
-        for &(i, _) in &wanted {
-            let t = Instant::now();
-            let _ = p.get(i);
-            worst = worst.max(t.elapsed());
-        }
+        let t = Instant::now();
+        let _ = PatchSource::pending(&p);
+        worst = worst.max(t.elapsed());
         let t = Instant::now();
         loaded += p.poll().len();
         worst = worst.max(t.elapsed());
@@ -263,20 +195,16 @@ fn corrupt_patch_fails_once_others_load() {
     let wanted: Vec<(u32, f32)> = (0..n as u32).map(|i| (i, 1.0)).collect();
     p.request(&wanted);
     let ev = wait(&p, |e| e.len() == n);
-    let failed: Vec<&Event> = ev
+    let failed: Vec<&Answer> = ev
         .iter()
-        .filter(|e| matches!(e, Event::Failed { .. }))
+        .filter(|e| matches!(e, Answer::Failed { .. }))
         .collect();
     assert_eq!(failed.len(), 1, "{failed:?}");
-    assert!(matches!(failed[0], Event::Failed { node, .. } if *node == bad));
-    assert!(!p.is_resident(bad));
-    assert!(p.get(bad).is_none());
-    for i in (0..n as u32).filter(|&i| i != bad) {
-        assert!(p.is_resident(i));
-    }
-    // Asking again does not retry it.
-    p.request(&wanted);
-    assert_eq!(p.stats().pending, 0);
+    assert!(matches!(failed[0], Answer::Failed { node, .. } if *node == bad));
+    assert_eq!(ev.len(), n);
+    // Asking again for the failed node does not retry it.
+    p.request(&[(bad, 1.0)]);
+    assert_eq!(p.stats().queued, 0);
     std::thread::sleep(Duration::from_millis(50));
     assert!(p.poll().is_empty());
     assert_eq!(p.stats().failures, 1);
@@ -296,7 +224,7 @@ fn drop_with_pending_work_is_prompt() {
     );
     p.request(&(0..n).map(|i| (i, 1.0)).collect::<Vec<_>>());
     std::thread::sleep(Duration::from_millis(30)); // loaders are inside the delay now
-    assert!(p.stats().pending > 0);
+    assert!(p.stats().queued > 0);
     let t = Instant::now();
     drop(p);
     assert!(

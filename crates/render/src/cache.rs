@@ -9,14 +9,16 @@
 //! gfx-rs crate wgpu's own backends use), so nothing of this is hand-written but the
 //! bookkeeping.
 //!
-//! Eviction is by *group* (see [`crate::groups`]): the caller says which nodes travel
-//! together and which were used this frame; only groups not used this frame are evicted.
+//! The cache is mechanics only: which patches to hold and what to evict is decided by
+//! `tessera_stream::Scheduler`, through [`GpuStore`], the cache's `ResidentStore`
+//! face. The buffers start small and grow on demand up to the budget.
 
 use std::ops::Range;
 
 use range_alloc::RangeAllocator;
 use rustc_hash::FxHashMap;
 use tessera_format::PatchData;
+use tessera_stream::{ResidentStore, StoreError};
 
 /// One vertex as the shader reads it, 24 bytes.
 #[repr(C)]
@@ -67,8 +69,6 @@ pub struct Slot {
     pub vertices: Range<u32>,
     /// Index range (in indices) in the index buffer.
     pub indices: Range<u32>,
-    /// Group the node belongs to (eviction unit).
-    pub group: u32,
 }
 
 impl Slot {
@@ -77,15 +77,6 @@ impl Slot {
         u64::from(self.vertices.end - self.vertices.start) * VERTEX_BYTES
             + u64::from(self.indices.end - self.indices.start) * INDEX_BYTES
     }
-}
-
-/// Why an upload did not happen.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum UploadError {
-    /// No room even after evicting everything not used this frame.
-    Full,
-    /// The patch alone is larger than a buffer.
-    TooBig,
 }
 
 /// Counters of the cache.
@@ -103,10 +94,6 @@ pub struct GpuCache {
     vertices: Pool,
     indices: Pool,
     slots: FxHashMap<u32, Slot>,
-    /// Resident members per group.
-    group_members: FxHashMap<u32, Vec<u32>>,
-    /// Frame in which each group was last used; `u64::MAX` for pinned groups.
-    group_used: FxHashMap<u32, u64>,
     stats: GpuCacheStats,
     scratch: Vec<GpuVertex>,
 }
@@ -235,8 +222,6 @@ impl GpuCache {
                 half,
             ),
             slots: FxHashMap::default(),
-            group_members: FxHashMap::default(),
-            group_used: FxHashMap::default(),
             stats: GpuCacheStats::default(),
             scratch: Vec::new(),
         }
@@ -294,27 +279,6 @@ impl GpuCache {
         self.slots.contains_key(&node)
     }
 
-    /// Number of resident members of `group`.
-    pub fn group_resident(&self, group: u32) -> usize {
-        self.group_members.get(&group).map_or(0, Vec::len)
-    }
-
-    /// Marks `group` as used in `frame` (protects it from eviction during that frame).
-    pub fn touch_group(&mut self, group: u32, frame: u64) {
-        if let Some(u) = self.group_used.get_mut(&group) {
-            if *u != u64::MAX {
-                *u = frame;
-            }
-        }
-    }
-
-    /// Never evicts `group` (its resident members) from now on.
-    pub fn pin_group(&mut self, group: u32) {
-        if let Some(u) = self.group_used.get_mut(&group) {
-            *u = u64::MAX;
-        }
-    }
-
     /// Counters.
     pub fn stats(&self) -> GpuCacheStats {
         GpuCacheStats {
@@ -323,37 +287,31 @@ impl GpuCache {
         }
     }
 
-    /// Uploads `patch` for `node` (member of `group`), evicting groups not used in
-    /// `frame` when there is no room: first the least recently used of those for which
-    /// `prefer_evict` holds (the viewer passes the hysteresis test
-    /// `tessera_select::should_unload`, so groups a slightly closer view would need stay),
-    /// then the least recently used of the rest. A node already resident is left as is.
-    #[allow(clippy::too_many_arguments)]
+    /// Uploads `patch` for `node`, growing the buffers up to the budget when there is
+    /// no room; [`StoreError::Full`] when they are at their maximum and still have no
+    /// room (the caller evicts and retries). A node already resident is left as is.
     pub fn upload(
         &mut self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
         node: u32,
-        group: u32,
         patch: &PatchData,
         quant_step: f64,
-        frame: u64,
-        prefer_evict: &dyn Fn(u32) -> bool,
-    ) -> Result<u64, UploadError> {
+    ) -> Result<u64, StoreError> {
         if self.slots.contains_key(&node) {
             return Ok(0);
         }
-        let nv = u32::try_from(patch.positions.len()).map_err(|_| UploadError::TooBig)?;
-        let ni = u32::try_from(patch.indices.len()).map_err(|_| UploadError::TooBig)?;
+        let nv = u32::try_from(patch.positions.len()).map_err(|_| StoreError::TooBig)?;
+        let ni = u32::try_from(patch.indices.len()).map_err(|_| StoreError::TooBig)?;
         if nv > self.vertices.max || ni > self.indices.max {
-            return Err(UploadError::TooBig);
+            return Err(StoreError::TooBig);
         }
         let (vertices, indices) = loop {
             match self.try_alloc(nv, ni) {
                 Some(r) => break r,
                 None => {
-                    if !self.grow(device, queue, nv, ni) && !self.evict_one(frame, prefer_evict) {
-                        return Err(UploadError::Full);
+                    if !self.grow(device, queue, nv, ni) {
+                        return Err(StoreError::Full);
                     }
                 }
             }
@@ -365,18 +323,12 @@ impl GpuCache {
         self.scratch = verts;
         self.indices
             .write(queue, indices.start, bytemuck::cast_slice(&patch.indices));
-        let slot = Slot {
-            vertices,
-            indices,
-            group,
-        };
+        let slot = Slot { vertices, indices };
         let bytes = slot.bytes();
         self.stats.resident_bytes += bytes;
         self.stats.uploaded_bytes += bytes;
         self.stats.uploads += 1;
         self.slots.insert(node, slot);
-        self.group_members.entry(group).or_default().push(node);
-        self.group_used.entry(group).or_insert(frame);
         Ok(bytes)
     }
 
@@ -391,49 +343,44 @@ impl GpuCache {
         }
     }
 
-    /// Evicts the least recently used group not used in `frame`, preferring those
-    /// `prefer` accepts; false if none.
-    fn evict_one(&mut self, frame: u64, prefer: &dyn Fn(u32) -> bool) -> bool {
-        let pick = |preferred_only: bool| {
-            self.group_used
-                .iter()
-                .filter(|&(&g, &used)| used < frame && (!preferred_only || prefer(g)))
-                .min_by_key(|&(&g, &used)| (used, g))
-                .map(|(&g, _)| g)
-        };
-        match pick(true).or_else(|| pick(false)) {
-            Some(g) => {
-                self.evict_group(g);
-                true
-            }
-            None => false,
+    /// Frees `node`'s slot (nothing if not resident).
+    pub fn evict(&mut self, node: u32) {
+        if let Some(slot) = self.slots.remove(&node) {
+            self.stats.resident_bytes -= slot.bytes();
+            self.stats.evictions += 1;
+            self.vertices.free(slot.vertices);
+            self.indices.free(slot.indices);
         }
     }
+}
 
-    /// Removes every resident member of `group`.
-    pub fn evict_group(&mut self, group: u32) {
-        self.group_used.remove(&group);
-        for node in self.group_members.remove(&group).unwrap_or_default() {
-            if let Some(slot) = self.slots.remove(&node) {
-                self.stats.resident_bytes -= slot.bytes();
-                self.stats.evictions += 1;
-                self.vertices.free(slot.vertices);
-                self.indices.free(slot.indices);
-            }
-        }
+/// The cache as the streaming core's [`ResidentStore`]: the cache with the device and
+/// queue it uploads through and the model's grid step.
+pub struct GpuStore<'a> {
+    pub cache: &'a mut GpuCache,
+    pub device: &'a wgpu::Device,
+    pub queue: &'a wgpu::Queue,
+    pub quant_step: f64,
+}
+
+impl ResidentStore for GpuStore<'_> {
+    fn bytes_for(&self, patch: &PatchData) -> u64 {
+        patch_gpu_bytes(patch)
     }
-
-    /// Evicts every group not used in `frame` (full-resolution streaming).
-    pub fn evict_unused(&mut self, frame: u64) {
-        let old: Vec<u32> = self
-            .group_used
-            .iter()
-            .filter(|&(_, &u)| u < frame)
-            .map(|(&g, _)| g)
-            .collect();
-        for g in old {
-            self.evict_group(g);
-        }
+    fn upload(&mut self, node: u32, patch: &PatchData) -> Result<u64, StoreError> {
+        self.cache
+            .upload(self.device, self.queue, node, patch, self.quant_step)
+    }
+    fn evict(&mut self, node: u32) {
+        self.cache.evict(node);
+    }
+    fn resident_bytes(&self) -> u64 {
+        self.cache.stats().resident_bytes
+    }
+    fn flush(&mut self) {
+        // Submitting nothing hands the staged writes to the device and frees their
+        // staging copies.
+        self.queue.submit([]);
     }
 }
 

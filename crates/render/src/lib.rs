@@ -1,22 +1,20 @@
-//! Tessera's renderer (issue 3): a wgpu GPU patch cache with a range allocator and LRU
-//! eviction by residency group, a simple lit patch pipeline, offscreen targets with
-//! readback, and a [`Viewer`] that runs selection + paging + upload + draw per frame.
+//! Tessera's renderer: a wgpu GPU patch cache with a range allocator (the streaming
+//! core's resident store, [`GpuStore`]), a simple lit patch pipeline, offscreen targets
+//! with readback, and a [`Viewer`] that runs one frame per call.
 //!
-//! Data flow per progressive frame: `tessera_select::select_resident` over what the GPU
-//! holds → missing groups to the `tessera_page::Pager` (visible first, then the prefetch
-//! set) → finished groups uploaded into the [`GpuCache`] → one render pass.
+//! Data flow per progressive frame: `tessera_stream::Scheduler::frame` selects over what
+//! the GPU holds, asks the `tessera_page::Pager` for missing groups (visible first, then
+//! the prefetch set) and uploads finished groups into the [`GpuCache`] → one render pass.
 
 pub mod cache;
 pub mod gpu;
-pub mod groups;
 pub mod image;
 pub mod path;
 pub mod renderer;
 pub mod viewer;
 
-pub use cache::{GpuCache, GpuCacheStats, GpuVertex};
+pub use cache::{GpuCache, GpuCacheStats, GpuStore, GpuVertex};
 pub use gpu::Gpu;
-pub use groups::Groups;
 pub use image::{diff_stats, enclosed_background_pixels, psnr, Image};
 pub use path::{CameraPath, PathError};
 pub use renderer::{FrameParams, Renderer, PATCH_SHADER};

@@ -1,0 +1,32 @@
+//! Tessera's streaming core: what each frame decides, for every front end.
+//!
+//! CPU only (no GPU types, no threads of its own, no file I/O; it builds for
+//! `wasm32-unknown-unknown`). A [`Scheduler`] per model holds the policy that keeps a
+//! partly resident cut crack-free and the frame from ever waiting: selection over what
+//! is resident, residency [`Groups`] and their readiness, the needed groups and their
+//! priorities, prefetch sets, the upload budget per frame, eviction order and
+//! hysteresis, and the per-frame [`FrameStats`]. It drives two small traits:
+//!
+//! - a [`PatchSource`]: request nodes with priorities (replacing, so cancelling, the
+//!   previous wants), poll finished or failed ones; `tessera-page`'s loader threads over
+//!   a memory map today, next an HTTP fetcher, a web worker in the browser;
+//! - a [`ResidentStore`]: upload a patch, evict it, report bytes; `tessera-render`'s GPU
+//!   cache, or an in-memory fake in the tests.
+//!
+//! Both caches the scheduler keeps (decoded patches in RAM, groups in the store) use one
+//! [`Lru`] type under a byte budget, with one frame counter for recency.
+
+mod groups;
+mod lru;
+mod scheduler;
+mod source;
+mod store;
+
+pub use groups::Groups;
+pub use lru::{Lru, PREFERENCE_WINDOW};
+pub use scheduler::{
+    decoded_bytes, default_clock, Clock, CompleteError, FrameStats, Mode, Scheduler,
+    SchedulerOptions, MAX_UPLOAD_ROUNDS, PREFETCH_GROWTH, UNLOAD_GROWTH,
+};
+pub use source::{Answer, PatchSource};
+pub use store::{ResidentStore, StoreError};

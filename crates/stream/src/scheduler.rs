@@ -1,0 +1,827 @@
+//! The frame scheduler: what one frame draws, asks for, uploads and evicts.
+//!
+//! Three modes ([`Mode`]):
+//! - **progressive** ([`Scheduler::frame`], interactive): the frame never waits. It
+//!   selects the best cut of what the store holds, asks the [`PatchSource`] for what is
+//!   missing (visible first, then the prefetch set) and uploads, within a per-frame byte
+//!   budget, the groups whose patches have all arrived. Coarser nodes stand in until then.
+//! - **complete** ([`Scheduler::complete_frame`], offline frames, references): the cut as
+//!   if everything were resident; missing patches are read on the spot
+//!   ([`PatchSource::read_now`]) and a cut larger than the store is drawn in several
+//!   passes, evicting between them.
+//! - **full resolution**: every leaf, no culling: the brute-force reference.
+//!
+//! Crack-freedom while partly resident comes from residency groups ([`Groups`]): a
+//! group counts only when all its members are resident and the groups it depends on
+//! count. Eviction is by group, least recently used first, under a byte budget, never
+//! a group touched in the current frame (the groups of the drawn nodes and everything
+//! they depend on), and preferring groups that even a view with spheres grown by
+//! [`UNLOAD_GROWTH`] would not need (hysteresis).
+//!
+//! Time: the scheduler reads no clock of its own; the caller passes the frame's time
+//! (for camera prediction) and may pass a clock for the selection-time statistic.
+
+use std::sync::Arc;
+
+use rustc_hash::FxHashSet;
+use serde::Serialize;
+use tessera_format::{ModelIndex, PatchData, NO_NODE};
+use tessera_select::{
+    predict_camera, prefetch_set, select_resident, should_unload, Camera, NodeView,
+    PrefetchOptions, Selection, ViewParams,
+};
+
+use crate::groups::{Groups, Readiness};
+use crate::lru::Lru;
+use crate::source::{Answer, PatchSource};
+use crate::store::{ResidentStore, StoreError};
+
+/// Select-upload rounds per progressive frame (each round's uploads make the next
+/// level wanted, often already prefetched).
+pub const MAX_UPLOAD_ROUNDS: usize = 8;
+/// Sphere growth of the prefetch set.
+pub const PREFETCH_GROWTH: f32 = 1.5;
+/// Sphere growth of the unload test (more than the prefetch growth: hysteresis).
+pub const UNLOAD_GROWTH: f32 = 2.0;
+/// Priority added to visible missing nodes so they load before any prefetch.
+const VISIBLE_PRIORITY: f32 = 1e6;
+/// Highest priority a prefetch request gets.
+const PREFETCH_PRIORITY_MAX: f32 = 1e5;
+/// Patches read per batch by a complete frame.
+const COMPLETE_BATCH: usize = 64;
+
+/// How frames are produced; see the module docs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Mode {
+    Progressive,
+    Complete,
+    FullResolution,
+}
+
+/// A clock in milliseconds (only differences are used).
+pub type Clock = fn() -> f64;
+
+/// The default clock: monotonic milliseconds natively; on `wasm32-unknown-unknown`,
+/// where `std::time::Instant` is unavailable, always 0 (a browser front end passes
+/// `performance.now()` instead).
+pub fn default_clock() -> f64 {
+    #[cfg(not(target_arch = "wasm32"))]
+    {
+        use std::sync::OnceLock;
+        use std::time::Instant;
+        static START: OnceLock<Instant> = OnceLock::new();
+        START.get_or_init(Instant::now).elapsed().as_secs_f64() * 1e3
+    }
+    #[cfg(target_arch = "wasm32")]
+    {
+        0.0
+    }
+}
+
+/// Options of a [`Scheduler`].
+#[derive(Clone, Debug)]
+pub struct SchedulerOptions {
+    /// Screen-space error tolerance, pixels.
+    pub tolerance_px: f32,
+    /// Frustum and normal-cone culling.
+    pub cull: bool,
+    pub mode: Mode,
+    /// Budget of the resident store (GPU bytes). Default 256 MiB.
+    pub store_budget_bytes: u64,
+    /// Budget of decoded patches held in RAM. Default 128 MiB.
+    pub ram_budget_bytes: u64,
+    /// Most bytes uploaded per progressive frame (the first group of a frame may exceed
+    /// it, so a group larger than the budget still loads). Default 32 MiB.
+    pub upload_budget_bytes: u64,
+    /// Ask for the prefetch set (grown spheres, predicted camera). Default on.
+    pub prefetch: bool,
+    /// Clock for the selection-time statistic.
+    pub clock: Clock,
+}
+
+impl Default for SchedulerOptions {
+    fn default() -> Self {
+        SchedulerOptions {
+            tolerance_px: 1.0,
+            cull: true,
+            mode: Mode::Progressive,
+            store_budget_bytes: 256 << 20,
+            ram_budget_bytes: 128 << 20,
+            upload_budget_bytes: 32 << 20,
+            prefetch: true,
+            clock: default_clock,
+        }
+    }
+}
+
+/// What one frame did (written per frame by `tessera render --stats`).
+#[derive(Clone, Debug, Default, Serialize, PartialEq)]
+pub struct FrameStats {
+    pub frame: u64,
+    /// Nodes drawn.
+    pub selected_nodes: usize,
+    pub triangles: u64,
+    /// Deepest level drawn.
+    pub max_level: u8,
+    /// Bytes written to the store this frame.
+    pub bytes_uploaded: u64,
+    pub patches_uploaded: usize,
+    /// Drawn nodes that were already resident when the frame began.
+    pub cache_hits: usize,
+    /// Nodes the view needed that were not resident when the frame began.
+    pub cache_misses: usize,
+    /// Progressive: patches asked of the source and not answered yet.
+    pub pending_loads: usize,
+    /// Patches that failed to load (bad checksum, truncation), cumulative.
+    pub failed_patches: usize,
+    /// CPU time of selection + prefetch, milliseconds.
+    pub selection_ms: f64,
+    /// Wall time of the frame until the GPU finished drawing it, milliseconds (set by
+    /// the front end).
+    pub frame_ms: f64,
+    /// Render passes (more than one when a cut did not fit the store).
+    pub passes: u32,
+    pub gpu_resident_bytes: u64,
+    /// Patches evicted from the store so far.
+    pub gpu_evictions: u64,
+    pub ram_resident_bytes: u64,
+}
+
+/// Why a complete frame could not be drawn.
+#[derive(Debug)]
+pub enum CompleteError<E> {
+    /// Nothing fits even in an empty store.
+    StoreTooSmall,
+    /// The source cannot read on demand (complete frames need it).
+    NoBlockingReads,
+    /// The front end's pass failed.
+    Pass(E),
+}
+
+/// Per-node facts the statistics need (copied once from the index).
+#[derive(Clone, Copy)]
+struct NodeFacts {
+    triangles: u32,
+    level: u8,
+}
+
+/// The per-frame policy over one model. See the module docs.
+pub struct Scheduler {
+    nv: NodeView,
+    groups: Groups,
+    facts: Vec<NodeFacts>,
+    opts: SchedulerOptions,
+    /// Frames started: the one recency counter of both caches.
+    frame: u64,
+    /// Memo epoch of [`Readiness`] and of the group walks; separate from `frame`.
+    epoch: u64,
+    readiness: Readiness,
+    /// Per group: epoch of the last walk that visited it.
+    visit: Vec<u64>,
+    /// What the store holds.
+    res: Residency,
+    /// Decoded patches in RAM.
+    ram: Lru<Arc<PatchData>>,
+    failed: FxHashSet<u32>,
+    sel: Selection,
+    prefetch: Vec<(u32, f32)>,
+    prev_camera: Option<(Camera, f64)>,
+    answers: Vec<Answer>,
+}
+
+/// What the store holds, by node and by group, and the groups' LRU order. Apart from
+/// the scheduler's read-only tables so an upload can borrow both.
+struct Residency {
+    /// Resident in the store, per node.
+    resident: Vec<bool>,
+    /// Resident members, per group.
+    members: Vec<u32>,
+    /// Groups in the store (value unused); bytes: store bytes of their resident members.
+    lru: Lru<()>,
+    /// Patches evicted so far.
+    evictions: u64,
+}
+
+impl Residency {
+    /// Whether every member of group `g` is in the store.
+    fn complete(&self, groups: &Groups, g: u32) -> bool {
+        self.members[g as usize] as usize == groups.members(g).len()
+    }
+
+    /// Removes every resident member of group `g` from the store.
+    fn evict_group<R: ResidentStore + ?Sized>(&mut self, groups: &Groups, store: &mut R, g: u32) {
+        self.lru.remove(g);
+        for &m in groups.members(g) {
+            if std::mem::replace(&mut self.resident[m as usize], false) {
+                store.evict(m);
+                self.evictions += 1;
+            }
+        }
+        self.members[g as usize] = 0;
+    }
+
+    /// Evicts the least recently used group not used in `frame` (preferring those
+    /// `prefer` accepts); false if there is none.
+    fn evict_one<R: ResidentStore + ?Sized>(
+        &mut self,
+        groups: &Groups,
+        store: &mut R,
+        frame: u64,
+        prefer: &impl Fn(u32) -> bool,
+    ) -> bool {
+        match self.lru.victim(frame, prefer) {
+            Some(g) => {
+                self.evict_group(groups, store, g);
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// Evicts every group not used in `frame` and not pinned.
+    fn evict_unused<R: ResidentStore + ?Sized>(
+        &mut self,
+        groups: &Groups,
+        store: &mut R,
+        frame: u64,
+    ) {
+        for g in self.lru.unused_since(frame) {
+            self.evict_group(groups, store, g);
+        }
+    }
+
+    /// Uploads `node` (member of group `g`) in `frame`, evicting groups not used in
+    /// `frame` to stay within the budget (and when the store itself is full). `pin`:
+    /// the group is never evicted (roots: the fallback for everything else).
+    #[allow(clippy::too_many_arguments)]
+    fn upload<R: ResidentStore + ?Sized>(
+        &mut self,
+        groups: &Groups,
+        store: &mut R,
+        frame: u64,
+        (node, g, pin): (u32, u32, bool),
+        patch: &PatchData,
+        prefer: &impl Fn(u32) -> bool,
+    ) -> Result<u64, StoreError> {
+        if self.resident[node as usize] {
+            return Ok(0);
+        }
+        let need = store.bytes_for(patch);
+        if need > self.lru.budget() {
+            return Err(StoreError::TooBig);
+        }
+        while self.lru.would_exceed(need) {
+            if !self.evict_one(groups, store, frame, prefer) {
+                return Err(StoreError::Full);
+            }
+        }
+        let bytes = loop {
+            match store.upload(node, patch) {
+                Ok(b) => break b,
+                Err(StoreError::Full) => {
+                    if !self.evict_one(groups, store, frame, prefer) {
+                        return Err(StoreError::Full);
+                    }
+                }
+                Err(e) => return Err(e),
+            }
+        };
+        self.resident[node as usize] = true;
+        self.members[g as usize] += 1;
+        self.lru.insert(g, (), bytes, frame);
+        if pin {
+            self.lru.pin(g);
+        }
+        Ok(bytes)
+    }
+}
+
+impl Scheduler {
+    /// A scheduler for the model `index` describes; nothing is resident yet.
+    pub fn new(index: &ModelIndex, opts: SchedulerOptions) -> Scheduler {
+        let nv = NodeView::new(index.header(), index.nodes());
+        let groups = Groups::new(&nv, index.nodes());
+        let facts = index
+            .nodes()
+            .iter()
+            .map(|n| NodeFacts {
+                triangles: n.triangle_count,
+                level: n.level,
+            })
+            .collect();
+        let g = groups.len();
+        let n = nv.len();
+        Scheduler {
+            readiness: Readiness::new(g),
+            visit: vec![0; g],
+            res: Residency {
+                resident: vec![false; n],
+                members: vec![0; g],
+                lru: Lru::new(opts.store_budget_bytes),
+                evictions: 0,
+            },
+            ram: Lru::new(opts.ram_budget_bytes),
+            nv,
+            groups,
+            facts,
+            opts,
+            frame: 0,
+            epoch: 0,
+            failed: FxHashSet::default(),
+            sel: Selection::default(),
+            prefetch: Vec::new(),
+            prev_camera: None,
+            answers: Vec::new(),
+        }
+    }
+
+    /// The options.
+    pub fn options(&self) -> &SchedulerOptions {
+        &self.opts
+    }
+
+    /// The residency groups.
+    pub fn groups(&self) -> &Groups {
+        &self.groups
+    }
+
+    /// The compact node table the traversals read.
+    pub fn node_view(&self) -> &NodeView {
+        &self.nv
+    }
+
+    /// Nodes drawn by the last frame, depth-first order.
+    pub fn draw(&self) -> &[u32] {
+        &self.sel.draw
+    }
+
+    /// Whether `node`'s patch is in the store.
+    pub fn is_resident(&self, node: u32) -> bool {
+        self.res.resident.get(node as usize).copied().unwrap_or(false)
+    }
+
+    /// Nodes known to fail.
+    pub fn failed(&self) -> &FxHashSet<u32> {
+        &self.failed
+    }
+
+    /// Frames started so far.
+    pub fn frame_number(&self) -> u64 {
+        self.frame
+    }
+
+    /// Reads the roots now (when the source can block) and uploads them, pinned: the
+    /// first frame then shows the whole model at its coarsest level and nothing else is
+    /// loaded before it. A root that fails is skipped (a hole, reported). Without
+    /// blocking reads the roots are asked for by the first frame like any missing node.
+    pub fn load_roots<S, R>(&mut self, source: &mut S, store: &mut R)
+    where
+        S: PatchSource + ?Sized,
+        R: ResidentStore + ?Sized,
+    {
+        let roots: Vec<u32> = (0..self.nv.root_count()).collect();
+        let Some(answers) = source.read_now(&roots) else {
+            return;
+        };
+        for a in answers {
+            match a {
+                Answer::Loaded { node, patch } => {
+                    let key = (node, self.groups.of(node), true);
+                    let r = self.res.upload(&self.groups, store, self.frame, key, &patch, &|_| false);
+                    if let Err(e) = r {
+                        tracing::warn!(node, error = ?e, "root patch skipped");
+                        self.failed.insert(node);
+                    }
+                }
+                Answer::Failed { node, error } => {
+                    tracing::warn!(node, %error, "root patch skipped");
+                    self.failed.insert(node);
+                }
+            }
+        }
+    }
+
+    /// The cut the store can draw for `camera` right now, without changing anything
+    /// (no request, no upload, no recency): for picking, and for tests.
+    pub fn resident_cut(&mut self, camera: &Camera) -> Vec<u32> {
+        let view = self.view_params(camera);
+        let mut sel = Selection::default();
+        std::mem::swap(&mut sel, &mut self.sel);
+        self.select_resident_now(&view);
+        std::mem::swap(&mut sel, &mut self.sel);
+        sel.draw
+    }
+
+    fn view_params(&self, camera: &Camera) -> ViewParams {
+        ViewParams::new(
+            camera,
+            self.nv.cube_origin(),
+            self.opts.tolerance_px,
+            self.opts.cull,
+        )
+    }
+
+    /// Collects the source's answers: patches into the RAM cache, failures remembered.
+    fn collect<S: PatchSource + ?Sized>(&mut self, source: &mut S) {
+        let mut answers = std::mem::take(&mut self.answers);
+        source.poll(&mut answers);
+        for a in answers.drain(..) {
+            match a {
+                Answer::Loaded { node, patch } => {
+                    if (node as usize) < self.res.resident.len() {
+                        let bytes = decoded_bytes(&patch);
+                        let (admitted, _) = self.ram.admit(node, patch, bytes, self.frame);
+                        if !admitted {
+                            tracing::debug!(node, bytes, "patch refused: RAM full of wanted patches");
+                        }
+                    }
+                }
+                Answer::Failed { node, error } => {
+                    if self.failed.insert(node) {
+                        tracing::warn!(node, %error, "patch skipped, its parent is shown instead");
+                    }
+                }
+            }
+        }
+        self.answers = answers;
+    }
+
+    /// Selection over what the store holds (groups complete and reachable).
+    fn select_resident_now(&mut self, view: &ViewParams) {
+        self.epoch += 1;
+        let epoch = self.epoch;
+        let (groups, res) = (&self.groups, &self.res);
+        let complete = |g: u32| res.complete(groups, g);
+        let readiness = std::cell::RefCell::new(&mut self.readiness);
+        let usable = |n: u32| {
+            readiness
+                .borrow_mut()
+                .ready(groups, groups.of(n), epoch, &complete)
+        };
+        select_resident(&self.nv, view, &usable, &mut self.sel);
+    }
+
+    /// Marks the groups of the drawn nodes and everything they depend on (which
+    /// includes the groups of all their ancestors) as used in this frame: evicting any
+    /// of them would make a drawn group unusable.
+    fn touch_draw_set(&mut self) {
+        self.epoch += 1;
+        let stamp = self.epoch;
+        let mut stack: Vec<u32> = Vec::new();
+        for &n in &self.sel.draw {
+            stack.push(self.groups.of(n));
+            while let Some(g) = stack.pop() {
+                if self.visit[g as usize] == stamp {
+                    continue;
+                }
+                self.visit[g as usize] = stamp;
+                self.res.lru.touch(g, self.frame);
+                stack.extend_from_slice(self.groups.dependencies(g));
+            }
+        }
+    }
+
+    /// Groups (with priority) that must be loaded for the missing nodes: each one's
+    /// group and, transitively, the incomplete groups it depends on (dependencies are
+    /// nearer the root and get higher priorities, so they load first).
+    fn needed_groups(&mut self) -> Vec<(u32, f32)> {
+        self.epoch += 1;
+        let stamp = self.epoch;
+        let mut out = Vec::new();
+        let mut stack = Vec::new();
+        for &(n, pri) in &self.sel.missing {
+            let pri = if pri.is_finite() { pri } else { 1e9 };
+            stack.push((self.groups.of(n), 0u32));
+            while let Some((g, depth)) = stack.pop() {
+                if self.visit[g as usize] == stamp {
+                    continue;
+                }
+                self.visit[g as usize] = stamp;
+                if !self.res.complete(&self.groups, g) {
+                    out.push((g, pri + depth as f32));
+                }
+                for &d in self.groups.dependencies(g) {
+                    stack.push((d, depth + 1));
+                }
+            }
+        }
+        out.sort_by(|a, b| b.1.total_cmp(&a.1));
+        out
+    }
+
+    /// One progressive frame (never waits): see the module docs. `time_s` is the
+    /// frame's time in seconds (any origin), used to predict the camera.
+    pub fn frame<S, R>(
+        &mut self,
+        camera: &Camera,
+        time_s: f64,
+        source: &mut S,
+        store: &mut R,
+    ) -> FrameStats
+    where
+        S: PatchSource + ?Sized,
+        R: ResidentStore + ?Sized,
+    {
+        let clock = self.opts.clock;
+        self.frame += 1;
+        let mut stats = FrameStats::default();
+        self.collect(source);
+        let view = self.view_params(camera);
+        let ts = clock();
+        self.select_resident_now(&view);
+        let draw_before: FxHashSet<u32> = self.sel.draw.iter().copied().collect();
+        stats.cache_misses = self.sel.missing.len();
+        if self.opts.prefetch {
+            let predicted = self.prev_camera.as_ref().map(|(prev, t)| {
+                let dt = (time_s - t).max(0.0);
+                predict_camera(prev, camera, dt, dt * 4.0)
+            });
+            let popts = PrefetchOptions {
+                sphere_growth: PREFETCH_GROWTH,
+                predicted,
+            };
+            prefetch_set(&self.nv, &view, &popts, &mut self.prefetch);
+        } else {
+            self.prefetch.clear();
+        }
+        stats.selection_ms = clock() - ts;
+
+        // Upload finished groups, most urgent first, within the byte budget; then select
+        // again, since uploaded groups make their children wanted, which the source may
+        // already have delivered (prefetched). A few rounds per frame, never waiting.
+        let mut budget = self.opts.upload_budget_bytes;
+        let mut wanted: Vec<(u32, f32)> = Vec::new();
+        let mut stale = false;
+        for round in 0..MAX_UPLOAD_ROUNDS {
+            let ts = clock();
+            if round > 0 {
+                self.select_resident_now(&view);
+            }
+            self.touch_draw_set();
+            let needed = self.needed_groups();
+            stats.selection_ms += clock() - ts;
+            wanted.clear();
+            let uploads_before = stats.patches_uploaded;
+            // Hysteresis: evict first what even a view with spheres grown by
+            // UNLOAD_GROWTH (more than the prefetch growth) would not need.
+            let (nv, groups, frame) = (&self.nv, &self.groups, self.frame);
+            let unloadable = |h: u32| {
+                groups
+                    .members(h)
+                    .iter()
+                    .all(|&x| should_unload(nv, x, &view, UNLOAD_GROWTH))
+            };
+            for &(g, pri) in &needed {
+                if group_failed(groups, &self.failed, g) {
+                    continue;
+                }
+                let mut patches: Vec<(u32, Arc<PatchData>)> = Vec::new();
+                let mut all = true;
+                for &m in groups.members(g) {
+                    if self.res.resident[m as usize] {
+                        continue;
+                    }
+                    // A use: patches of a group still waiting for siblings stay in RAM.
+                    match self.ram.touch(m, frame) {
+                        Some(p) => patches.push((m, p.clone())),
+                        None => {
+                            all = false;
+                            wanted.push((m, VISIBLE_PRIORITY + pri));
+                        }
+                    }
+                }
+                let size: u64 = patches.iter().map(|(_, p)| store.bytes_for(p)).sum();
+                if !all || (size > budget && stats.patches_uploaded > 0) {
+                    continue;
+                }
+                for (m, p) in &patches {
+                    let key = (*m, g, nv.nodes()[*m as usize].parent == NO_NODE);
+                    match self.res.upload(groups, store, frame, key, p, &unloadable) {
+                        Ok(b) => {
+                            budget -= b.min(budget);
+                            stats.bytes_uploaded += b;
+                            stats.patches_uploaded += 1;
+                        }
+                        Err(StoreError::Full) => break,
+                        Err(StoreError::TooBig) => {
+                            tracing::warn!(node = m, "patch larger than the store, skipped");
+                            self.failed.insert(*m);
+                        }
+                    }
+                }
+                // Keep the group from being evicted by later uploads of this frame.
+                self.res.lru.touch(g, frame);
+            }
+            stale = stats.patches_uploaded > uploads_before;
+            if !stale {
+                break;
+            }
+        }
+        if stale {
+            // The last round uploaded: draw what it made usable.
+            let ts = clock();
+            self.select_resident_now(&view);
+            self.touch_draw_set();
+            stats.selection_ms += clock() - ts;
+        }
+        // Prefetch: lower priorities than anything visible.
+        for &(n, pri) in &self.prefetch {
+            if !self.res.resident[n as usize] && !self.ram.contains(n) && !self.failed.contains(&n)
+            {
+                wanted.push((n, pri.min(PREFETCH_PRIORITY_MAX)));
+            }
+        }
+        wanted.retain(|(n, _)| !self.failed.contains(n));
+        source.request(&wanted);
+        let hint: Vec<u32> = self
+            .prefetch
+            .iter()
+            .map(|&(n, _)| n)
+            .filter(|&n| !self.ram.contains(n))
+            .collect();
+        source.hint(&hint);
+        stats.pending_loads = source.pending();
+        stats.cache_hits = self
+            .sel
+            .draw
+            .iter()
+            .filter(|n| draw_before.contains(n))
+            .count();
+        stats.passes = 1;
+        self.prev_camera = Some((camera.clone(), time_s));
+        self.finish_stats(&mut stats, store);
+        stats
+    }
+
+    /// One complete or full-resolution frame (see the module docs): the whole cut is
+    /// made resident, reading what is missing with [`PatchSource::read_now`]; `pass`
+    /// draws the given resident nodes (`true`: first pass of the frame, clear the
+    /// target) and is called again after evictions when the cut does not fit.
+    pub fn complete_frame<S, R, E>(
+        &mut self,
+        camera: &Camera,
+        source: &mut S,
+        store: &mut R,
+        mut pass: impl FnMut(&mut R, &[u32], bool) -> Result<(), E>,
+    ) -> Result<FrameStats, CompleteError<E>>
+    where
+        S: PatchSource + ?Sized,
+        R: ResidentStore + ?Sized,
+    {
+        let clock = self.opts.clock;
+        self.frame += 1;
+        let frame = self.frame;
+        let mut stats = FrameStats::default();
+        self.collect(source);
+        let ts = clock();
+        let full = self.opts.mode == Mode::FullResolution;
+        if full {
+            self.sel.draw.clear();
+            self.sel.missing.clear();
+            let hot = self.nv.nodes();
+            let failed = &self.failed;
+            self.sel.draw.extend(
+                (0..hot.len() as u32)
+                    .filter(|&n| hot[n as usize].children == [NO_NODE, NO_NODE])
+                    .filter(|n| !failed.contains(n)),
+            );
+        } else {
+            let view = self.view_params(camera);
+            let (failed, groups) = (&self.failed, &self.groups);
+            // Everything counts as resident except groups with a failed member.
+            let ok = |n: u32| !group_failed(groups, failed, groups.of(n));
+            select_resident(&self.nv, &view, &ok, &mut self.sel);
+        }
+        stats.selection_ms = clock() - ts;
+
+        let groups = &self.groups;
+        let mut todo: Vec<u32> = Vec::new();
+        for &n in &self.sel.draw {
+            if self.res.resident[n as usize] {
+                self.res.lru.touch(groups.of(n), frame);
+                stats.cache_hits += 1;
+            } else {
+                todo.push(n);
+            }
+        }
+        stats.cache_misses = todo.len();
+        let mut drawn = vec![false; self.sel.draw.len()];
+        let mut cleared = false;
+        let mut next = 0;
+        loop {
+            // Read and upload batches until everything is resident or the store is full.
+            let mut full_now = false;
+            while next < todo.len() && !full_now {
+                let end = (next + COMPLETE_BATCH).min(todo.len());
+                let answers = source
+                    .read_now(&todo[next..end])
+                    .ok_or(CompleteError::NoBlockingReads)?;
+                for (i, a) in answers.into_iter().enumerate() {
+                    match a {
+                        Answer::Loaded { node, patch } => {
+                            let g = groups.of(node);
+                            let root = self.nv.nodes()[node as usize].parent == NO_NODE;
+                            let key = (node, g, root);
+                            match self.res.upload(groups, store, frame, key, &patch, &|_| false) {
+                                Ok(b) => {
+                                    stats.bytes_uploaded += b;
+                                    stats.patches_uploaded += 1;
+                                    self.res.lru.touch(g, frame);
+                                }
+                                Err(StoreError::Full) => {
+                                    full_now = true;
+                                    next += i;
+                                    break;
+                                }
+                                Err(StoreError::TooBig) => {
+                                    tracing::warn!(node, "patch larger than the store");
+                                    self.failed.insert(node);
+                                }
+                            }
+                        }
+                        Answer::Failed { node, error } => {
+                            tracing::warn!(node, %error, "patch skipped");
+                            self.failed.insert(node);
+                        }
+                    }
+                }
+                if !full_now {
+                    next = end;
+                }
+                // Hand this batch's writes over now: a GPU keeps a staging copy of every
+                // write until it is submitted, which would double the memory of a cut
+                // streamed through the store.
+                store.flush();
+            }
+            // One pass over what is resident and not drawn yet.
+            let mut nodes = Vec::new();
+            for (i, &n) in self.sel.draw.iter().enumerate() {
+                if !drawn[i] && self.res.resident[n as usize] {
+                    nodes.push(n);
+                    drawn[i] = true;
+                }
+            }
+            if nodes.is_empty() && cleared && next >= todo.len() {
+                break;
+            }
+            if nodes.is_empty() && full_now {
+                return Err(CompleteError::StoreTooSmall);
+            }
+            pass(store, &nodes, !cleared).map_err(CompleteError::Pass)?;
+            cleared = true;
+            stats.passes += 1;
+            if next >= todo.len() {
+                break;
+            }
+            // Make room: everything drawn so far may go (later writes are ordered after
+            // the pass just handed over). Pinned roots stay.
+            self.res.evict_unused(groups, store, frame + 1);
+        }
+        if !full && self.sel.draw.iter().any(|n| self.failed.contains(n)) {
+            tracing::warn!("corrupt patches in the cut; the next frame shows their parents");
+        }
+        self.prev_camera = None;
+        self.finish_stats(&mut stats, store);
+        Ok(stats)
+    }
+
+    fn finish_stats<R: ResidentStore + ?Sized>(&self, stats: &mut FrameStats, store: &R) {
+        stats.frame = self.frame;
+        stats.failed_patches = self.failed.len();
+        stats.gpu_resident_bytes = store.resident_bytes();
+        stats.gpu_evictions = self.res.evictions;
+        stats.ram_resident_bytes = self.ram.bytes();
+        stats.selected_nodes = self.sel.draw.len();
+        stats.triangles = self
+            .sel
+            .draw
+            .iter()
+            .map(|&n| u64::from(self.facts[n as usize].triangles))
+            .sum();
+        stats.max_level = self
+            .sel
+            .draw
+            .iter()
+            .map(|&n| self.facts[n as usize].level)
+            .max()
+            .unwrap_or(0);
+    }
+}
+
+/// Whether a member of group `g` failed (such a group can never be complete).
+fn group_failed(groups: &Groups, failed: &FxHashSet<u32>, g: u32) -> bool {
+    groups.members(g).iter().any(|m| failed.contains(m))
+}
+
+/// Bytes a decoded patch occupies in RAM (array payloads; the small `Vec` headers are
+/// not counted). This is what the RAM budget counts.
+pub fn decoded_bytes(p: &PatchData) -> u64 {
+    use std::mem::size_of;
+    (p.positions.len() * size_of::<[u32; 3]>()
+        + p.normals.len() * size_of::<[f32; 3]>()
+        + p.colors.len() * size_of::<[u8; 4]>()
+        + p.uvs.len() * size_of::<[f32; 2]>()
+        + p.morph_targets.len() * size_of::<[u32; 3]>()
+        + p.indices.len() * size_of::<u32>()) as u64
+}

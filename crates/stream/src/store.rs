@@ -1,0 +1,33 @@
+//! Where resident patches live: the [`ResidentStore`] trait (the GPU cache in
+//! `tessera-render`; an in-memory fake in the tests).
+//!
+//! The store is mechanics only: it uploads and frees single patches and says how many
+//! bytes a patch takes. Which patches to hold, for how long, and what to evict when is
+//! the scheduler's decision ([`crate::Scheduler`]), under its own byte budget.
+
+use tessera_format::PatchData;
+
+/// Why an upload did not happen.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum StoreError {
+    /// No room now (the scheduler evicts something and tries again, or stops
+    /// uploading this frame).
+    Full,
+    /// The patch alone is larger than the store can ever hold.
+    TooBig,
+}
+
+/// Resident patches, by node. See the module docs.
+pub trait ResidentStore {
+    /// Bytes `patch` would take once uploaded (what the scheduler's budget counts).
+    fn bytes_for(&self, patch: &PatchData) -> u64;
+    /// Makes `node`'s patch resident; returns the bytes it takes.
+    fn upload(&mut self, node: u32, patch: &PatchData) -> Result<u64, StoreError>;
+    /// Frees `node`'s patch (nothing if not resident).
+    fn evict(&mut self, node: u32);
+    /// Bytes held by resident patches.
+    fn resident_bytes(&self) -> u64;
+    /// Hands staged uploads to the device (a GPU store submits them so their staging
+    /// memory is released). Default: nothing.
+    fn flush(&mut self) {}
+}
