@@ -2,8 +2,9 @@
 //! `scripts/check-wasm`, run by `scripts/wasm/probe.mjs` under Node): the module gets a
 //! whole model file's bytes, parses its index, decodes patches through a byte-slice
 //! source, and runs progressive frames of the scheduler over a store that only counts
-//! bytes, exactly the code a browser client runs. A `cdylib`: native builds compile it
-//! to a shared library nobody loads.
+//! bytes: the code a browser client runs, until the browser client (its own issue)
+//! replaces this crate. Natively it builds as an ordinary library; its test runs the
+//! same frames on a generated model.
 
 use std::sync::Arc;
 
@@ -103,4 +104,29 @@ fn run(bytes: &[u8], frames: u32) -> Option<i64> {
         last = ((st.selected_nodes as i64) << 32) | (st.triangles as i64 & 0xffff_ffff);
     }
     Some(last)
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn refines_past_the_roots_on_a_real_model() {
+        let dir = tempfile::tempdir().unwrap();
+        let ply = dir.path().join("s.ply");
+        let tsr = dir.path().join("s.tsr");
+        let opts = tessera_gen::SphereOptions {
+            triangles: 20_000,
+            ..Default::default()
+        };
+        tessera_gen::write_sphere(&ply, &opts).unwrap();
+        let build = tessera_build::BuildOptions {
+            leaf_triangles: 400,
+            node_triangles: 200,
+            ..Default::default()
+        };
+        tessera_build::build(&ply, &tsr, &build, &tessera_build::NoProgress).unwrap();
+        let bytes = std::fs::read(&tsr).unwrap();
+        let r = super::run(&bytes, 30).expect("parses");
+        assert!(r >> 32 > 6, "drew {} nodes", r >> 32);
+        assert_eq!(super::run(&bytes[..bytes.len() - 1], 30), None, "truncated model");
+    }
 }
