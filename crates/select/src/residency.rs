@@ -28,10 +28,11 @@
 //! The tetrahedra of a diamond share a refinement edge that their children split, so if
 //! one of them refines (its children resident) while another stays coarse (some of its
 //! children missing), the cut mixes levels across that edge and the patches crack there.
-//! The loader (renderer issue) must therefore make a diamond's nodes resident, and evict
-//! them, as one unit (and a diamond only after the diamonds of its parents); with that
-//! invariant every node of a diamond takes the same decision and the per-node rule gives
-//! a conforming cut: [`crate::select_cut`]'s cut coarsened where children are missing.
+//! The caller must therefore make a diamond's children resident, and evict them, as one
+//! unit (and only after the diamonds of its parents): `tessera-stream`'s residency groups
+//! and its `resident` predicate do exactly that. With that invariant every node of a
+//! diamond takes the same decision and the per-node rule gives a conforming cut:
+//! [`crate::select_cut`]'s cut coarsened where children are missing.
 
 use tessera_format::{Header, NodeRecord, NO_NODE};
 
