@@ -9,7 +9,8 @@ use std::time::Instant;
 use anyhow::{bail, Context};
 use serde_json::json;
 use tessera_format::Model;
-use tessera_render::{CameraPath, FrameStats, Mode, Viewer, ViewerOptions};
+use tessera_render::{FrameStats, Mode, Viewer, ViewerOptions};
+use tessera_select::CameraPath;
 
 #[derive(clap::Args)]
 #[command(group(

@@ -9,14 +9,12 @@
 pub mod cache;
 pub mod gpu;
 pub mod image;
-pub mod path;
 pub mod renderer;
 pub mod viewer;
 
 pub use cache::{GpuCache, GpuCacheStats, GpuStore, GpuVertex};
 pub use gpu::Gpu;
 pub use image::{diff_stats, enclosed_background_pixels, psnr, Image};
-pub use path::{CameraPath, PathError};
 pub use renderer::{FrameParams, Renderer, PATCH_SHADER};
 pub use viewer::{FrameStats, Mode, Viewer, ViewerOptions};
 

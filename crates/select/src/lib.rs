@@ -25,6 +25,7 @@ pub mod edges;
 pub mod extract;
 mod hash;
 pub mod merge;
+pub mod path;
 pub mod residency;
 pub mod select;
 
@@ -33,6 +34,7 @@ pub use edges::{edge_report, EdgeReport};
 #[cfg(feature = "extract")]
 pub use extract::{extract_nodes, write_cut_ply, Extracted};
 pub use merge::{merge_patches, CutMesh, PatchRef};
+pub use path::{CameraPath, PathError, PATH_FIELDS};
 pub use residency::{
     predict_camera, prefetch_set, select_resident, should_unload, HotNode, NodeView,
     PrefetchOptions, Selection,

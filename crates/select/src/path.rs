@@ -1,4 +1,4 @@
-//! Camera paths for `tessera render` (format in `docs/camera.md`): keyframes in the
+//! Camera paths (format in `docs/camera.md`), for `tessera render` and every front end: keyframes in the
 //! shared camera format, interpolated over a number of frames; or an orbit around the
 //! model's bounding sphere.
 
@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use glam::DVec3;
 use serde_json::Value;
-use tessera_select::{Camera, CameraError, Orbit};
+use crate::camera::{Camera, CameraError, Orbit};
 
 /// Fields of a path document.
 pub const PATH_FIELDS: [&str; 3] = ["frames", "loop", "keyframes"];
