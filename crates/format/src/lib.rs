@@ -13,6 +13,8 @@
 //! each, ordered by level then Morton code of the tetrahedron centre) | patch data (one
 //! encoded patch per node, in node-table order, each with its own CRC-32).
 
+#[cfg(feature = "write")]
+mod atomic;
 mod codec;
 mod error;
 mod grid;
@@ -25,6 +27,8 @@ mod verify;
 #[cfg(feature = "write")]
 mod writer;
 
+#[cfg(feature = "write")]
+pub use atomic::{AtomicFile, AtomicFileError};
 pub use codec::{
     decode_patch, encode_patch, oct_decode, oct_encode, PatchData, MAX_PATCH_TRIANGLES,
     MAX_PATCH_VERTICES, PATCH_CODEC_VERSION, PATCH_FLAG_MORPH, PATCH_FLAG_ZSTD, PATCH_HEADER_BYTES,

@@ -4,14 +4,15 @@
 //! knows the final node order; holding them all in memory would not scale to huge
 //! models. So patches go to a [`PatchSpool`] (an append-only temporary file) and
 //! [`write_model`] copies them, in node-table order, into the final file. The final file
-//! is written under a temporary name and renamed into place, so a crash or error never
-//! leaves a half-written model at the destination.
+//! is an [`AtomicFile`]: written under a temporary name and renamed into place, so a crash
+//! or error never leaves a half-written model at the destination.
 
 use std::fs::{File, OpenOptions};
-use std::io::{BufWriter, Write};
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 
+use crate::atomic::AtomicFile;
 use crate::error::FormatError;
 use crate::records::{header_crc32, Header, NodeRecord, FORMAT_VERSION, MAGIC};
 
@@ -171,20 +172,6 @@ fn read_exact_at(file: &File, mut buf: &mut [u8], mut offset: u64) -> std::io::R
     Ok(())
 }
 
-/// Removes the temporary output file unless the write completed.
-struct TempGuard {
-    path: PathBuf,
-    armed: bool,
-}
-
-impl Drop for TempGuard {
-    fn drop(&mut self) {
-        if self.armed {
-            let _ = std::fs::remove_file(&self.path);
-        }
-    }
-}
-
 /// Writes a complete model file atomically.
 ///
 /// `nodes[i]`'s patch is `patches[i]` in `spool`. Fills in the header's `magic`,
@@ -233,27 +220,9 @@ pub fn write_model(
     h.node_table_crc32 = crc32fast::hash(table_bytes);
     h.header_crc32 = header_crc32(&h);
 
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    let file_name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "model".into());
-    let tmp_path = dir.join(unique_name(&format!(".{file_name}")));
-    let file = OpenOptions::new()
-        .write(true)
-        .create_new(true)
-        .open(&tmp_path)
-        .map_err(|e| FormatError::io(&tmp_path, e))?;
-    let mut guard = TempGuard {
-        path: tmp_path.clone(),
-        armed: true,
-    };
+    let mut out = AtomicFile::create(path, 8 << 20)?;
+    let tmp_path = out.tmp_path().to_path_buf();
     let io = |e: std::io::Error| FormatError::io(&tmp_path, e);
-
-    let mut out = BufWriter::with_capacity(8 << 20, file);
     out.write_all(bytemuck::bytes_of(&h)).map_err(io)?;
     out.write_all(table_bytes).map_err(io)?;
     let mut buf = Vec::new();
@@ -265,16 +234,7 @@ pub fn write_model(
         }
         out.write_all(&buf).map_err(io)?;
     }
-    let file = out.into_inner().map_err(|e| io(e.into_error()))?;
-    file.sync_all().map_err(io)?;
-    drop(file);
-    std::fs::rename(&tmp_path, path).map_err(|e| FormatError::io(path, e))?;
-    guard.armed = false;
-    // Make the rename durable; failure here does not undo a complete file.
-    #[cfg(unix)]
-    if let Ok(d) = File::open(&dir) {
-        let _ = d.sync_all();
-    }
+    out.commit()?;
     tracing::info!(
         path = %path.display(),
         nodes = nodes.len(),

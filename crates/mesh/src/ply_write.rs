@@ -2,16 +2,15 @@
 //!
 //! Tools that produce meshes (the generator, exporters, tests) need to write files far
 //! larger than RAM, and must never leave a half-written file where a finished one is
-//! expected. [`PlyWriter`] therefore streams into a temporary file beside the target,
-//! checks at [`PlyWriter::finish`] that exactly the declared numbers of vertices and
-//! triangles were written, fsyncs, and only then renames the file into place. A writer
-//! dropped without `finish` (an error, a panic, a killed run between the two) removes its
-//! temporary file, so nothing ever appears at the target path.
+//! expected. [`PlyWriter`] therefore streams into a temporary file beside the target (a
+//! [`tessera_format::AtomicFile`]), checks at [`PlyWriter::finish`] that exactly the
+//! declared numbers of vertices and triangles were written, fsyncs, and only then renames
+//! the file into place. A writer dropped without `finish` (an error, a panic, a killed run
+//! between the two) removes its temporary file, so nothing ever appears at the target path.
 
-use std::fs::File;
-use std::io::{BufWriter, Write};
+use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
+use tessera_format::{AtomicFile, AtomicFileError};
 
 use crate::{Attributes, MeshError, Vertex};
 
@@ -38,9 +37,8 @@ pub struct PlyWriterOptions {
 #[derive(Debug)]
 pub struct PlyWriter {
     path: PathBuf,
-    tmp_path: PathBuf,
     /// `None` once finished (or after the file was handed over in `finish`).
-    out: Option<BufWriter<File>>,
+    out: Option<AtomicFile>,
     attributes: Attributes,
     vertex_count: u64,
     face_count: u64,
@@ -56,16 +54,16 @@ impl PlyWriter {
                 path: path.to_path_buf(),
             });
         }
-        let tmp_path = temp_path_for(path)?;
-        let file = File::options()
-            .write(true)
-            .create_new(true)
-            .open(&tmp_path)
-            .map_err(|e| MeshError::io(&tmp_path, e))?;
+        if path.file_name().is_none() {
+            return Err(MeshError::Usage {
+                path: path.to_path_buf(),
+                detail: "output path has no file name".into(),
+            });
+        }
+        let file = AtomicFile::create(path, BUFFER_BYTES).map_err(io_error)?;
         let mut writer = PlyWriter {
             path: path.to_path_buf(),
-            tmp_path,
-            out: Some(BufWriter::with_capacity(BUFFER_BYTES, file)),
+            out: Some(file),
             attributes: opts.attributes,
             vertex_count: opts.vertex_count,
             face_count: opts.face_count,
@@ -145,24 +143,14 @@ impl PlyWriter {
         let Some(out) = self.out.take() else {
             return Err(self.usage("writer already failed"));
         };
-        let file = out
-            .into_inner()
-            .map_err(|e| MeshError::io(&self.tmp_path, e.into_error()))?;
-        file.sync_all()
-            .map_err(|e| MeshError::io(&self.tmp_path, e))?;
-        drop(file);
-        std::fs::rename(&self.tmp_path, &self.path).map_err(|e| MeshError::io(&self.path, e))?;
-        // The temporary name no longer exists: make Drop a no-op.
-        self.tmp_path = PathBuf::new();
-        sync_parent_dir(&self.path);
-        Ok(())
+        out.commit().map_err(io_error)
     }
 
     fn write_bytes(&mut self, bytes: &[u8]) -> Result<(), MeshError> {
         match self.out.as_mut() {
             Some(out) => out
                 .write_all(bytes)
-                .map_err(|e| MeshError::io(&self.tmp_path, e)),
+                .map_err(|e| MeshError::io(out.tmp_path(), e)),
             None => Err(self.usage("writer already finished")),
         }
     }
@@ -175,45 +163,9 @@ impl PlyWriter {
     }
 }
 
-impl Drop for PlyWriter {
-    fn drop(&mut self) {
-        // Close before removing (required on Windows); errors are irrelevant here.
-        drop(self.out.take());
-        if !self.tmp_path.as_os_str().is_empty() {
-            let _ = std::fs::remove_file(&self.tmp_path);
-        }
-    }
-}
-
-/// `dir/.name.tmp-PID-N` for `dir/name`.
-fn temp_path_for(path: &Path) -> Result<PathBuf, MeshError> {
-    let name = path.file_name().ok_or_else(|| MeshError::Usage {
-        path: path.to_path_buf(),
-        detail: "output path has no file name".into(),
-    })?;
-    let mut tmp_name = std::ffi::OsString::from(".");
-    tmp_name.push(name);
-    // pid + a per-process counter: concurrent writers never share a temporary file.
-    static NEXT: AtomicU64 = AtomicU64::new(0);
-    let n = NEXT.fetch_add(1, Ordering::Relaxed);
-    tmp_name.push(format!(".tmp-{}-{n}", std::process::id()));
-    Ok(path.with_file_name(tmp_name))
-}
-
-/// Make the rename durable (best effort: not every platform can open a directory).
-fn sync_parent_dir(path: &Path) {
-    #[cfg(unix)]
-    {
-        let dir = match path.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p,
-            _ => Path::new("."),
-        };
-        if let Ok(d) = File::open(dir) {
-            let _ = d.sync_all();
-        }
-    }
-    #[cfg(not(unix))]
-    let _ = path;
+/// An [`AtomicFile`] error as a [`MeshError`] naming the file it concerns.
+fn io_error(e: AtomicFileError) -> MeshError {
+    MeshError::io(e.path, e.source)
 }
 
 fn header_text(opts: &PlyWriterOptions) -> String {

@@ -27,38 +27,19 @@ impl Image {
 
     /// Writes a PNG atomically (temporary file beside `path`, then rename).
     pub fn save_png(&self, path: &Path) -> Result<(), RenderError> {
-        let dir = path.parent().filter(|p| !p.as_os_str().is_empty());
-        let name = path
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_else(|| "frame.png".into());
-        let tmp = match dir {
-            Some(d) => d.join(format!(".{name}.{}.tmp", std::process::id())),
-            None => format!(".{name}.{}.tmp", std::process::id()).into(),
-        };
-        let io = |e: std::io::Error| RenderError::Io(format!("{}: {e}", path.display()));
-        let result = (|| {
-            let file = std::fs::File::create(&tmp).map_err(io)?;
-            let mut w = std::io::BufWriter::new(file);
-            image::write_buffer_with_format(
-                &mut w,
-                &self.rgba,
-                self.width,
-                self.height,
-                image::ExtendedColorType::Rgba8,
-                image::ImageFormat::Png,
-            )
-            .map_err(|e| RenderError::Io(format!("{}: {e}", path.display())))?;
-            let file = w
-                .into_inner()
-                .map_err(|e| RenderError::Io(format!("{}: {e}", path.display())))?;
-            file.sync_all().map_err(io)?;
-            std::fs::rename(&tmp, path).map_err(io)
-        })();
-        if result.is_err() {
-            let _ = std::fs::remove_file(&tmp);
-        }
-        result
+        let err = |e: &dyn std::fmt::Display| RenderError::Io(format!("{}: {e}", path.display()));
+        let mut file =
+            tessera_format::AtomicFile::create(path, 1 << 16).map_err(|e| err(&e.source))?;
+        image::write_buffer_with_format(
+            &mut file,
+            &self.rgba,
+            self.width,
+            self.height,
+            image::ExtendedColorType::Rgba8,
+            image::ImageFormat::Png,
+        )
+        .map_err(|e| err(&e))?;
+        file.commit().map_err(|e| err(&e.source))
     }
 
     /// Reads a PNG (any colour type, converted to RGBA8).
