@@ -205,15 +205,8 @@ impl ModelIndex {
     /// Checks and decodes node `i`'s patch from its encoded `bytes`.
     pub fn decode_patch(&self, i: usize, bytes: &[u8]) -> Result<PatchData, FormatError> {
         self.check_patch(i, bytes)?;
-        let n = &self.nodes[i];
-        codec::decode_patch(
-            bytes,
-            self.header.attributes,
-            n.quant_min,
-            n.vertex_count,
-            n.triangle_count,
-        )
-        .map_err(|e| e.with_node(i as u32))
+        codec::decode_patch(bytes, self.header.attributes, (&self.nodes[i]).into())
+            .map_err(|e| e.with_node(i as u32))
     }
 
     /// Reads node `i`'s patch from `source` and decodes it.

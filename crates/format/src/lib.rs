@@ -30,7 +30,7 @@ mod writer;
 #[cfg(feature = "write")]
 pub use atomic::{AtomicFile, AtomicFileError};
 pub use codec::{
-    decode_patch, encode_patch, oct_decode, oct_encode, PatchData, MAX_PATCH_TRIANGLES,
+    decode_patch, encode_patch, oct_decode, oct_encode, PatchData, PatchShape, MAX_PATCH_TRIANGLES,
     MAX_PATCH_VERTICES, PATCH_CODEC_VERSION, PATCH_FLAG_MORPH, PATCH_FLAG_ZSTD, PATCH_HEADER_BYTES,
 };
 pub use error::FormatError;

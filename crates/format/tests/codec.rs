@@ -7,6 +7,15 @@ use std::time::Instant;
 use common::{quant_min, terrain_patch};
 use tessera_format::*;
 
+/// The node-record facts a patch is decoded against.
+fn shape(quant_min: [u32; 3], vertex_count: u32, triangle_count: u32) -> PatchShape {
+    PatchShape {
+        quant_min,
+        vertex_count,
+        triangle_count,
+    }
+}
+
 fn section_lengths(bytes: &[u8]) -> Vec<u32> {
     (0..6)
         .map(|k| u32::from_le_bytes(bytes[16 + 4 * k..20 + 4 * k].try_into().unwrap()))
@@ -26,7 +35,9 @@ fn bytes_per_triangle_on_terrain_patch() {
         let t0 = Instant::now();
         let reps = 20;
         for _ in 0..reps {
-            std::hint::black_box(decode_patch(&bytes, ATTR_NORMALS, qmin, verts, tris).unwrap());
+            std::hint::black_box(
+                decode_patch(&bytes, ATTR_NORMALS, shape(qmin, verts, tris)).unwrap(),
+            );
         }
         let dec = t0.elapsed() / reps;
         println!(
@@ -39,7 +50,7 @@ fn bytes_per_triangle_on_terrain_patch() {
             dec.as_secs_f64() * 1e3,
             tris as f64 / dec.as_secs_f64() / 1e6,
         );
-        let back = decode_patch(&bytes, ATTR_NORMALS, qmin, verts, tris).unwrap();
+        let back = decode_patch(&bytes, ATTR_NORMALS, shape(qmin, verts, tris)).unwrap();
         assert_eq!(back.positions, patch.positions);
         assert_eq!(back.morph_targets, patch.morph_targets);
     }
@@ -110,7 +121,7 @@ proptest! {
         let bytes = encode_patch(&p, attrs, qmin);
         let v = p.vertex_count() as u32;
         let t = p.triangle_count() as u32;
-        let back = decode_patch(&bytes, attrs, qmin, v, t).unwrap();
+        let back = decode_patch(&bytes, attrs, shape(qmin, v, t)).unwrap();
         prop_assert_eq!(&back.positions, &p.positions);
         prop_assert_eq!(&back.colors, &p.colors);
         prop_assert_eq!(&back.uvs, &p.uvs);
@@ -119,12 +130,12 @@ proptest! {
         prop_assert_eq!(&back.normals, &oct);
         prop_assert_eq!(rotate_min_first(&back.indices), rotate_min_first(&p.indices));
         // Wrong expectations are errors, not panics.
-        prop_assert!(decode_patch(&bytes, attrs ^ ATTR_COLORS, qmin, v, t).is_err());
-        prop_assert!(decode_patch(&bytes, attrs, qmin, v + 1, t).is_err());
+        prop_assert!(decode_patch(&bytes, attrs ^ ATTR_COLORS, shape(qmin, v, t)).is_err());
+        prop_assert!(decode_patch(&bytes, attrs, shape(qmin, v + 1, t)).is_err());
         // Every truncation fails cleanly.
         for cut in [0, bytes.len() / 2, bytes.len().saturating_sub(1)] {
             if cut < bytes.len() {
-                prop_assert!(decode_patch(&bytes[..cut], attrs, qmin, v, t).is_err());
+                prop_assert!(decode_patch(&bytes[..cut], attrs, shape(qmin, v, t)).is_err());
             }
         }
     }
@@ -134,7 +145,7 @@ proptest! {
         let mut bytes = encode_patch(&p, attrs, qmin);
         let at = at % bytes.len();
         bytes[at] ^= xor;
-        let _ = decode_patch(&bytes, attrs, qmin, p.vertex_count() as u32, p.triangle_count() as u32);
+        let _ = decode_patch(&bytes, attrs, shape(qmin, p.vertex_count() as u32, p.triangle_count() as u32));
     }
 
     #[test]
@@ -160,7 +171,7 @@ proptest! {
             }
             bytes[9] &= !PATCH_FLAG_ZSTD;
         }
-        let _ = decode_patch(&bytes, attrs, [5, 6, 7], v, t);
+        let _ = decode_patch(&bytes, attrs, shape([5, 6, 7], v, t));
     }
 }
 
@@ -225,9 +236,7 @@ fn morph_round_trip(p: &PatchData) -> Vec<u8> {
     let back = decode_patch(
         &bytes,
         0,
-        qmin,
-        p.vertex_count() as u32,
-        p.triangle_count() as u32,
+        shape(qmin, p.vertex_count() as u32, p.triangle_count() as u32),
     )
     .unwrap();
     assert_eq!(back.positions, p.positions);
@@ -343,8 +352,8 @@ fn corrupt_morph_codes_are_errors() {
     // The rewrite itself is faithful.
     let same = rewrite_sections(&bytes, |_| {});
     assert_eq!(
-        decode_patch(&same, 0, qmin, v, t).unwrap(),
-        decode_patch(&bytes, 0, qmin, v, t).unwrap()
+        decode_patch(&same, 0, shape(qmin, v, t)).unwrap(),
+        decode_patch(&bytes, 0, shape(qmin, v, t)).unwrap()
     );
     let morph = |edit: &dyn Fn(&mut Vec<u8>)| rewrite_sections(&bytes, |s| edit(&mut s[5]));
     let code_len = |s: &Vec<u8>| u32::from_le_bytes(s[..4].try_into().unwrap()) as usize;
@@ -394,18 +403,18 @@ fn corrupt_morph_codes_are_errors() {
     ];
     // Another vertex coded explicit: the explicit stream is too short. The vertex codec
     // may or may not notice; it must not panic.
-    let _ = decode_patch(&morph(&|s| s[4 + 9] = 1), 0, qmin, v, t);
+    let _ = decode_patch(&morph(&|s| s[4 + 9] = 1), 0, shape(qmin, v, t));
     // No explicit stream at all but an explicit code.
     let mut q = p.clone();
     q.morph_targets[7] = q.positions[7];
     let no_explicit = encode_patch(&q, 0, qmin);
     let bad = rewrite_sections(&no_explicit, |s| s[5][4 + 9] = 1);
     assert!(matches!(
-        decode_patch(&bad, 0, qmin, v, t),
+        decode_patch(&bad, 0, shape(qmin, v, t)),
         Err(FormatError::CorruptPatch { .. })
     ));
     for (what, bad) in cases {
-        match decode_patch(&bad, 0, qmin, v, t) {
+        match decode_patch(&bad, 0, shape(qmin, v, t)) {
             Err(FormatError::CorruptPatch { .. }) => {}
             other => panic!("{what}: {other:?}"),
         }
@@ -439,9 +448,7 @@ fn normals_round_trip(p: &PatchData) -> Vec<u8> {
     let back = decode_patch(
         &bytes,
         ATTR_NORMALS,
-        qmin,
-        p.vertex_count() as u32,
-        p.triangle_count() as u32,
+        shape(qmin, p.vertex_count() as u32, p.triangle_count() as u32),
     )
     .unwrap();
     let oct: Vec<[f32; 3]> = p
@@ -601,7 +608,7 @@ fn corrupt_normal_sections_are_errors() {
     let qmin = quant_min(&p);
     let bytes = encode_patch(&p, ATTR_NORMALS, qmin);
     let (v, t) = (p.vertex_count() as u32, p.triangle_count() as u32);
-    let decode = |b: &[u8]| decode_patch(b, ATTR_NORMALS, qmin, v, t);
+    let decode = |b: &[u8]| decode_patch(b, ATTR_NORMALS, shape(qmin, v, t));
     let ok = rewrite_sections(&bytes, |_| {});
     assert!(decode(&ok).is_ok());
     type Edit = Box<dyn Fn(&mut Vec<u8>)>;
@@ -672,6 +679,6 @@ proptest! {
             let k = at % s[2].len();
             s[2][k] ^= xor;
         });
-        let _ = decode_patch(&mangled, ATTR_NORMALS, qmin, n as u32, tris as u32);
+        let _ = decode_patch(&mangled, ATTR_NORMALS, shape(qmin, n as u32, tris as u32));
     }
 }
