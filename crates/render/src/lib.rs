@@ -8,13 +8,12 @@
 
 pub mod cache;
 pub mod gpu;
-pub mod image;
 pub mod renderer;
 pub mod viewer;
 
 pub use cache::{GpuCache, GpuCacheStats, GpuStore, GpuVertex};
 pub use gpu::Gpu;
-pub use image::{diff_stats, enclosed_background_pixels, psnr, Image};
+pub use tessera_image::{diff_stats, enclosed_background_pixels, psnr, Image, ImageError};
 pub use renderer::{FrameParams, Renderer, PATCH_SHADER};
 pub use viewer::{FrameStats, Mode, Viewer, ViewerOptions};
 
@@ -31,4 +30,10 @@ pub enum RenderError {
     CacheTooSmall,
     #[error("{0}")]
     Io(String),
+}
+
+impl From<ImageError> for RenderError {
+    fn from(e: ImageError) -> RenderError {
+        RenderError::Io(e.0)
+    }
 }

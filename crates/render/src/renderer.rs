@@ -7,7 +7,7 @@ use glam::{DVec3, Mat4};
 use tessera_select::Camera;
 
 use crate::cache::{GpuCache, GpuVertex, Slot};
-use crate::image::Image;
+use tessera_image::Image;
 use crate::RenderError;
 
 /// The WGSL source of the patch shader (validated by a test with naga, no GPU needed).

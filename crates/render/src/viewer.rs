@@ -20,7 +20,7 @@ pub use tessera_stream::{FrameStats, Mode};
 
 use crate::cache::{GpuCache, GpuStore};
 use crate::gpu::Gpu;
-use crate::image::Image;
+use tessera_image::Image;
 use crate::renderer::{FrameParams, Renderer};
 use crate::RenderError;
 

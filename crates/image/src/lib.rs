@@ -1,8 +1,14 @@
-//! RGBA8 frames: PNG in and out (through the `image` crate), PSNR and pixel statistics.
+//! RGBA8 frames as every front end and test sees them: PNG in and out (through the
+//! `image` crate; feature `png`, default), and the image metrics the tests and
+//! benchmarks judge frames by (PSNR, pixel differences, pinholes). Pure CPU.
 
+#[cfg(feature = "png")]
 use std::path::Path;
 
-use crate::RenderError;
+/// A PNG that could not be read or written, with its path.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct ImageError(pub String);
 
 /// An RGBA8 image, rows top to bottom.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -26,8 +32,9 @@ impl Image {
     }
 
     /// Writes a PNG atomically (temporary file beside `path`, then rename).
-    pub fn save_png(&self, path: &Path) -> Result<(), RenderError> {
-        let err = |e: &dyn std::fmt::Display| RenderError::Io(format!("{}: {e}", path.display()));
+    #[cfg(feature = "png")]
+    pub fn save_png(&self, path: &Path) -> Result<(), ImageError> {
+        let err = |e: &dyn std::fmt::Display| ImageError(format!("{}: {e}", path.display()));
         let mut file =
             tessera_format::AtomicFile::create(path, 1 << 16).map_err(|e| err(&e.source))?;
         image::write_buffer_with_format(
@@ -43,9 +50,10 @@ impl Image {
     }
 
     /// Reads a PNG (any colour type, converted to RGBA8).
-    pub fn load_png(path: &Path) -> Result<Image, RenderError> {
+    #[cfg(feature = "png")]
+    pub fn load_png(path: &Path) -> Result<Image, ImageError> {
         let img = image::open(path)
-            .map_err(|e| RenderError::Io(format!("{}: {e}", path.display())))?
+            .map_err(|e| ImageError(format!("{}: {e}", path.display())))?
             .to_rgba8();
         Ok(Image {
             width: img.width(),
