@@ -237,11 +237,6 @@ impl GpuCache {
         &self.indices.buffer
     }
 
-    /// GPU bytes of the two buffers (what the cache holds from the device).
-    pub fn capacity_bytes(&self) -> u64 {
-        self.vertices.buffer.size() + self.indices.buffer.size()
-    }
-
     /// Grows whichever buffer lacks room for `nv` vertices / `ni` indices (copying the
     /// contents on the GPU); false when both are at their maximum.
     fn grow(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, nv: u32, ni: u32) -> bool {

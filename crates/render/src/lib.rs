@@ -6,12 +6,12 @@
 //! the GPU holds, asks the `tessera_page::Pager` for missing groups (visible first, then
 //! the prefetch set) and uploads finished groups into the [`GpuCache`] → one render pass.
 
-pub mod cache;
-pub mod gpu;
-pub mod renderer;
-pub mod viewer;
+mod cache;
+mod gpu;
+mod renderer;
+mod viewer;
 
-pub use cache::{GpuCache, GpuCacheStats, GpuStore, GpuVertex};
+pub use cache::{GpuCache, GpuCacheStats, GpuStore, GpuVertex, Slot};
 pub use gpu::Gpu;
 pub use tessera_image::{diff_stats, enclosed_background_pixels, psnr, Image, ImageError};
 pub use renderer::{FrameParams, Renderer, PATCH_SHADER};

@@ -18,7 +18,7 @@
 use std::fmt;
 use std::path::{Path, PathBuf};
 
-use glam::{DMat4, DVec3, Mat4, Vec3, Vec4};
+use glam::{DVec3, Mat4, Vec3, Vec4};
 use serde::{Deserialize, Deserializer, Serialize};
 use serde_json::Value;
 
@@ -476,13 +476,6 @@ impl Camera {
         let b = self.basis();
         let eye = dvec(self.position) - dvec(cube_origin);
         glam::dcamera::rh::view::look_to_mat4(eye, b.forward, b.up).as_mat4()
-    }
-
-    /// The view matrix in model coordinates, f64 (for consumers that keep f64 all the
-    /// way, e.g. to place several models).
-    pub fn view_matrix_model(&self) -> DMat4 {
-        let b = self.basis();
-        glam::dcamera::rh::view::look_to_mat4(dvec(self.position), b.forward, b.up)
     }
 
     /// A perspective projection with depth mapped to [0, 1] (WebGPU / wgpu convention).

@@ -346,29 +346,14 @@ impl Scheduler {
         &self.groups
     }
 
-    /// The compact node table the traversals read.
-    pub fn node_view(&self) -> &NodeView {
-        &self.nv
-    }
-
     /// Nodes drawn by the last frame, depth-first order.
     pub fn draw(&self) -> &[u32] {
         &self.sel.draw
     }
 
-    /// Whether `node`'s patch is in the store.
-    pub fn is_resident(&self, node: u32) -> bool {
-        self.res.resident.get(node as usize).copied().unwrap_or(false)
-    }
-
     /// Nodes known to fail.
     pub fn failed(&self) -> &FxHashSet<u32> {
         &self.failed
-    }
-
-    /// Frames started so far.
-    pub fn frame_number(&self) -> u64 {
-        self.frame
     }
 
     /// Reads the roots now (when the source can block) and uploads them, pinned: the

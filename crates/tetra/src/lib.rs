@@ -242,18 +242,6 @@ impl Tet {
         })
     }
 
-    /// The root whose tetrahedron contains lattice point `p` (ties broken towards the
-    /// lower root index), `None` outside the cube.
-    pub fn root_of(p: Point) -> Option<u8> {
-        if p.iter().any(|&c| !(0..=CUBE).contains(&c)) {
-            return None;
-        }
-        ROOT_AXES
-            .iter()
-            .position(|o| p[o[0]] >= p[o[1]] && p[o[1]] >= p[o[2]])
-            .map(|r| r as u8)
-    }
-
     /// The two children (bisection at the midpoint of the refinement edge).
     pub fn children(&self) -> [Tet; 2] {
         let k = self.tag as usize;
