@@ -67,29 +67,10 @@ impl Default for BuildOptions {
     }
 }
 
-/// Long work reports through this; the CLI maps it to progress bars, tests ignore it.
-pub trait Progress: Sync {
-    /// A new stage begins with `total` units of work (0 when unknown).
-    fn stage(&self, name: &str, total: u64);
-    /// `n` more units done.
-    fn advance(&self, n: u64);
-    /// The current stage is done.
-    fn finish_stage(&self);
-    /// Whether the user asked to stop (e.g. Ctrl-C). The builder checks it between units
-    /// of work and returns [`BuildError::Interrupted`], so temporary files are removed.
-    fn cancelled(&self) -> bool {
-        false
-    }
-}
-
-/// A [`Progress`] that reports nothing.
-pub struct NoProgress;
-
-impl Progress for NoProgress {
-    fn stage(&self, _: &str, _: u64) {}
-    fn advance(&self, _: u64) {}
-    fn finish_stage(&self) {}
-}
+/// The progress protocol (`tessera_mesh`'s, shared with the generators). The builder
+/// polls [`Progress::cancelled`] between units of work and returns
+/// [`BuildError::Interrupted`], so temporary files are removed.
+pub use tessera_mesh::{NoProgress, Progress};
 
 #[derive(Debug, thiserror::Error)]
 pub enum BuildError {

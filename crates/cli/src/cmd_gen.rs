@@ -1,11 +1,11 @@
 //! `tessera gen`: deterministic, streamed test meshes.
 
+use crate::progress::Bars;
 use anyhow::Context;
 use clap::Subcommand;
-use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
 use std::process::ExitCode;
-use tessera_gen::{GenProgress, SphereOptions, TerrainOptions, TileOptions};
+use tessera_gen::{SphereOptions, TerrainOptions, TileOptions};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -79,16 +79,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         | What::Terrain { quiet, output, .. }
         | What::Tile { quiet, output, .. } => (*quiet, output.clone()),
     };
-    let bar = if quiet {
-        ProgressBar::hidden()
-    } else {
-        ProgressBar::new(1000)
-    };
-    if let Ok(s) = ProgressStyle::with_template("{msg:>10} [{bar:40}] {percent}% ({eta})") {
-        bar.set_style(s.progress_chars("=> "));
-    }
-    bar.set_message("generate");
-    let tick = |p: GenProgress| bar.set_position((p.fraction() * 1000.0) as u64);
+    let bars = Bars::new(quiet);
     let report = match a.what {
         What::Sphere {
             triangles,
@@ -104,7 +95,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
                 colors,
                 noise,
             },
-            Some(&tick),
+            &bars,
         ),
         What::Terrain {
             triangles,
@@ -118,17 +109,13 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
                 seed,
                 colors,
             },
-            Some(&tick),
+            &bars,
         ),
-        What::Tile { input, copies, .. } => tessera_gen::write_tiled_with_progress(
-            &input,
-            &output,
-            &TileOptions { copies },
-            Some(&tick),
-        ),
+        What::Tile { input, copies, .. } => {
+            tessera_gen::write_tiled_with_progress(&input, &output, &TileOptions { copies }, &bars)
+        }
     }
     .with_context(|| format!("generating {}", output.display()))?;
-    bar.finish_and_clear();
     println!(
         "wrote {}: {} triangles, {} vertices",
         output.display(),

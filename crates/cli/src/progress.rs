@@ -4,7 +4,7 @@
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Mutex;
-use tessera_build::Progress;
+use tessera_mesh::Progress;
 
 /// Set by the first Ctrl-C (SIGINT/SIGTERM); the libraries poll it through
 /// `Progress::cancelled` and unwind, removing their temporary files.

@@ -12,6 +12,9 @@
 //! * [`write_sphere`]: a watertight, consistently oriented, bumpy closed 2-manifold.
 //! * [`write_terrain`]: an open heightfield with a boundary.
 //! * [`write_tiled`]: K translated copies of a real (small) scan.
+//!
+//! Each has a `_with_progress` form that reports one `generate` stage to a [`Progress`],
+//! the same protocol as the builder's (`tessera-mesh`'s trait).
 
 mod noise;
 mod sphere;
@@ -26,6 +29,7 @@ pub use terrain::{
 pub use tile::{write_tiled, write_tiled_with_progress, TileOptions};
 
 use tessera_mesh::MeshError;
+pub use tessera_mesh::{NoProgress, Progress};
 
 /// What a generator wrote.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -47,92 +51,55 @@ pub enum GenError {
     InvalidArgument(String),
 }
 
-/// Progress of a generator, passed to the optional progress callback.
-///
-/// The callback is called about every million elements (vertices or triangles) and once
-/// at the end, with `vertices == total_vertices` and `triangles == total_triangles`.
-/// Vertices are all written before the first triangle.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct GenProgress {
-    /// Vertices written so far.
-    pub vertices: u64,
-    /// Triangles written so far.
-    pub triangles: u64,
-    /// Vertices the file will hold.
-    pub total_vertices: u64,
-    /// Triangles the file will hold.
-    pub total_triangles: u64,
-}
-
-impl GenProgress {
-    /// Fraction of the work done, in `[0, 1]` (vertices and triangles weighted equally
-    /// per element).
-    pub fn fraction(&self) -> f64 {
-        let total = self.total_vertices + self.total_triangles;
-        if total == 0 {
-            1.0
-        } else {
-            (self.vertices + self.triangles) as f64 / total as f64
-        }
-    }
-}
-
-/// Optional progress callback.
-pub type ProgressFn<'a> = Option<&'a dyn Fn(GenProgress)>;
-
-/// Elements (vertices or triangles) between two progress calls.
+/// Elements (vertices or triangles) between two progress reports.
 pub(crate) const PROGRESS_STEP: u64 = 1 << 20;
 
 /// Vertices computed per parallel block.
 pub(crate) const VERTEX_BLOCK: usize = 1 << 16;
 
-/// Calls the progress callback every [`PROGRESS_STEP`] elements.
+/// Reports a generator's work as one [`Progress`] stage, `generate`, of `vertices +
+/// triangles` units (vertices are all written before the first triangle), advanced about
+/// every [`PROGRESS_STEP`] elements and completed by [`Ticker::finish`].
 pub(crate) struct Ticker<'a> {
-    progress: ProgressFn<'a>,
-    state: GenProgress,
-    next: u64,
+    progress: &'a dyn Progress,
+    /// Elements done and not yet reported.
+    pending: u64,
 }
 
 impl<'a> Ticker<'a> {
-    pub(crate) fn new(progress: ProgressFn<'a>, total_vertices: u64, total_triangles: u64) -> Self {
+    pub(crate) fn new(
+        progress: &'a dyn Progress,
+        total_vertices: u64,
+        total_triangles: u64,
+    ) -> Self {
+        progress.stage("generate", total_vertices + total_triangles);
         Ticker {
             progress,
-            state: GenProgress {
-                total_vertices,
-                total_triangles,
-                ..Default::default()
-            },
-            next: PROGRESS_STEP,
+            pending: 0,
         }
     }
 
     #[inline]
     pub(crate) fn add_vertices(&mut self, n: u64) {
-        self.state.vertices += n;
-        self.maybe_call();
+        self.add(n);
     }
 
     #[inline]
     pub(crate) fn add_triangles(&mut self, n: u64) {
-        self.state.triangles += n;
-        self.maybe_call();
+        self.add(n);
     }
 
     #[inline]
-    fn maybe_call(&mut self) {
-        let done = self.state.vertices + self.state.triangles;
-        if done >= self.next {
-            if let Some(f) = self.progress {
-                f(self.state);
-            }
-            self.next = (done / PROGRESS_STEP + 1) * PROGRESS_STEP;
+    fn add(&mut self, n: u64) {
+        self.pending += n;
+        if self.pending >= PROGRESS_STEP {
+            self.progress.advance(std::mem::take(&mut self.pending));
         }
     }
 
     pub(crate) fn finish(&mut self) {
-        if let Some(f) = self.progress {
-            f(self.state);
-        }
+        self.progress.advance(std::mem::take(&mut self.pending));
+        self.progress.finish_stage();
     }
 }
 

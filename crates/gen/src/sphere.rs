@@ -13,7 +13,7 @@ use std::path::Path;
 use tessera_mesh::{Attributes, PlyWriter, PlyWriterOptions, Vertex};
 
 use crate::noise::{ramp, Fbm};
-use crate::{stream_vertices, GenError, GenReport, ProgressFn, Ticker};
+use crate::{stream_vertices, GenError, GenReport, NoProgress, Progress, Ticker};
 
 /// Options of [`write_sphere`].
 #[derive(Clone, Debug, PartialEq)]
@@ -73,14 +73,14 @@ pub fn sphere_resolution(triangles: u64) -> Result<u64, GenError> {
 /// before the faces; no normals; colours (opaque) when `opts.colors`. The bytes depend
 /// only on `opts`. Memory use does not depend on the triangle count.
 pub fn write_sphere(path: &Path, opts: &SphereOptions) -> Result<GenReport, GenError> {
-    write_sphere_with_progress(path, opts, None)
+    write_sphere_with_progress(path, opts, &NoProgress)
 }
 
-/// [`write_sphere`] with a progress callback (see [`crate::GenProgress`]).
+/// [`write_sphere`] reporting one `generate` stage to `progress` (see [`crate::Progress`]).
 pub fn write_sphere_with_progress(
     path: &Path,
     opts: &SphereOptions,
-    progress: ProgressFn<'_>,
+    progress: &dyn Progress,
 ) -> Result<GenReport, GenError> {
     if !opts.noise.is_finite() || !(0.0..1.0).contains(&opts.noise) {
         return Err(GenError::InvalidArgument(format!(

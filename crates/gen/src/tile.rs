@@ -6,7 +6,7 @@ use tessera_mesh::{
     read_mesh, Attributes, MeshError, MeshHeader, MeshVisitor, PlyWriter, PlyWriterOptions, Vertex,
 };
 
-use crate::{GenError, GenReport, ProgressFn, Ticker};
+use crate::{GenError, GenReport, NoProgress, Progress, Ticker};
 
 /// Options of [`write_tiled`].
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -36,15 +36,15 @@ impl Default for TileOptions {
 /// [`GenError::InvalidArgument`] when `copies` is 0 or the output would have more than
 /// `u32::MAX` vertices, with [`GenError::Mesh`] when the input cannot be read.
 pub fn write_tiled(input: &Path, output: &Path, opts: &TileOptions) -> Result<GenReport, GenError> {
-    write_tiled_with_progress(input, output, opts, None)
+    write_tiled_with_progress(input, output, opts, &NoProgress)
 }
 
-/// [`write_tiled`] with a progress callback (see [`crate::GenProgress`]).
+/// [`write_tiled`] reporting one `generate` stage to `progress` (see [`crate::Progress`]).
 pub fn write_tiled_with_progress(
     input: &Path,
     output: &Path,
     opts: &TileOptions,
-    progress: ProgressFn<'_>,
+    progress: &dyn Progress,
 ) -> Result<GenReport, GenError> {
     if opts.copies == 0 {
         return Err(GenError::InvalidArgument(

@@ -11,12 +11,14 @@ mod error;
 mod obj;
 mod ply_read;
 mod ply_write;
+mod progress;
 mod source;
 mod stl;
 mod types;
 
 pub use error::MeshError;
 pub use ply_write::{PlyWriter, PlyWriterOptions};
+pub use progress::{NoProgress, Progress};
 pub use types::{Attributes, ImportReport, MeshHeader, MeshVisitor, Vertex};
 
 use std::path::Path;
