@@ -151,6 +151,20 @@ pub fn peak_rss_bytes() -> Option<u64> {
     Some(kb * 1024)
 }
 
+/// Resident set size of this process now, in bytes (Linux `/proc/self/statm`; 0
+/// elsewhere). Per-frame statistics use it.
+pub fn current_rss_bytes() -> u64 {
+    // Second field of /proc/self/statm: resident pages.
+    std::fs::read_to_string("/proc/self/statm")
+        .ok()
+        .and_then(|s| {
+            s.split_whitespace()
+                .nth(1)
+                .and_then(|v| v.parse::<u64>().ok())
+        })
+        .map_or(0, |pages| pages * 4096)
+}
+
 pub(crate) fn peak_rss_mib() -> u64 {
     peak_rss_bytes().map_or(0, |b| b >> 20)
 }

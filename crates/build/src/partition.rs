@@ -197,12 +197,18 @@ pub fn partition(
     let qpath = tmp.join("quantized.bin");
     let qs = quantize_vertices(imp, &grid, &qpath)?;
     let (shallow, deep) = key_depths(&qs, &grid, &sample, imp.face_count, opts);
-    write_keys(imp, &qs, &grid, shallow, &keys_path, opts, progress)?;
+    let pass = KeyPass {
+        imp,
+        qs: &qs,
+        grid: &grid,
+        keys: &keys_path,
+        opts,
+        progress,
+    };
+    write_keys(&pass, shallow)?;
     let crowded = crowded_cells(&keys_path, imp.face_count, shallow, opts)?;
     let key_depth = if crowded.is_empty() { shallow } else { deep };
-    deepen_keys(
-        imp, &qs, &grid, &keys_path, shallow, deep, &crowded, opts, progress,
-    )?;
+    deepen_keys(&pass, shallow, deep, &crowded)?;
     tracing::info!(
         seconds = t.elapsed().as_secs_f64(),
         shallow,
@@ -220,17 +226,7 @@ pub fn partition(
         .map(|&(r, l, p)| prefix(dfs_key(r, l, p), shallow))
         .filter(|c| !crowded.contains(c))
         .collect();
-    deepen_keys(
-        imp,
-        &qs,
-        &grid,
-        &keys_path,
-        shallow,
-        deep,
-        &closure_cells,
-        opts,
-        progress,
-    )?;
+    deepen_keys(&pass, shallow, deep, &closure_cells)?;
     tracing::info!(
         seconds = t.elapsed().as_secs_f64(),
         splits = split.len(),
@@ -341,20 +337,33 @@ fn crowded_cells(
         .collect())
 }
 
+/// What the key passes read and write: the imported faces, their quantised vertices,
+/// the grid, the key file (one `u64` per face), the options and the progress sink.
+struct KeyPass<'a> {
+    imp: &'a Imported,
+    qs: &'a QuantStore,
+    grid: &'a Grid,
+    keys: &'a Path,
+    opts: &'a BuildOptions,
+    progress: &'a dyn Progress,
+}
+
 /// Re-key at `deep` the faces whose cell at depth `shallow` is in `cells`. Deeper keys
 /// extend shallower ones (same descent), so the other keys stay valid.
-#[allow(clippy::too_many_arguments)]
 fn deepen_keys(
-    imp: &Imported,
-    qs: &QuantStore,
-    grid: &Grid,
-    keys: &Path,
+    pass: &KeyPass<'_>,
     shallow: u8,
     deep: u8,
     cells: &HashSet<u64>,
-    opts: &BuildOptions,
-    progress: &dyn Progress,
 ) -> Result<(), BuildError> {
+    let KeyPass {
+        imp,
+        qs,
+        grid,
+        keys,
+        opts,
+        progress,
+    } = *pass;
     if deep <= shallow || cells.is_empty() {
         return Ok(());
     }
@@ -406,15 +415,15 @@ fn deepen_keys(
 }
 
 /// Pass 1: one depth-first key per face.
-fn write_keys(
-    imp: &Imported,
-    qs: &QuantStore,
-    grid: &Grid,
-    depth: u8,
-    out: &Path,
-    opts: &BuildOptions,
-    progress: &dyn Progress,
-) -> Result<(), BuildError> {
+fn write_keys(pass: &KeyPass<'_>, depth: u8) -> Result<(), BuildError> {
+    let KeyPass {
+        imp,
+        qs,
+        grid,
+        keys: out,
+        opts,
+        progress,
+    } = *pass;
     progress.stage("locate", imp.face_count);
     let fp = &imp.faces_path;
     let mut faces =

@@ -62,18 +62,6 @@ pub struct Args {
     no_prefetch: bool,
 }
 
-fn current_rss_bytes() -> u64 {
-    // Second field of /proc/self/statm: resident pages.
-    std::fs::read_to_string("/proc/self/statm")
-        .ok()
-        .and_then(|s| {
-            s.split_whitespace()
-                .nth(1)
-                .and_then(|v| v.parse::<u64>().ok())
-        })
-        .map_or(0, |pages| pages * 4096)
-}
-
 pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     if a.width == 0 || a.height == 0 || a.width > 16384 || a.height > 16384 {
         bail!("--width and --height must be between 1 and 16384");
@@ -125,7 +113,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
             let img = viewer.read_image()?;
             img.save_png(&dir.join(format!("frame_{i:05}.png")))?;
         }
-        let rss = current_rss_bytes();
+        let rss = tessera_build::current_rss_bytes();
         let mut v = serde_json::to_value(&s)?;
         v["rss_bytes"] = json!(rss);
         frames.push(v);
@@ -133,7 +121,8 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     }
     // The kernel's high-water mark also sees peaks inside a frame, which the per-frame
     // samples above miss.
-    let peak_rss = tessera_build::peak_rss_bytes().unwrap_or_else(current_rss_bytes);
+    let peak_rss =
+        tessera_build::peak_rss_bytes().unwrap_or_else(tessera_build::current_rss_bytes);
     let n = all.len().max(1) as f64;
     let mean = |f: &dyn Fn(&FrameStats) -> f64| all.iter().map(f).sum::<f64>() / n;
     let mut sorted: Vec<f64> = all.iter().map(|s| s.frame_ms).collect();
@@ -189,15 +178,8 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
 
 fn write_atomic(path: &std::path::Path, bytes: &[u8]) -> anyhow::Result<()> {
     use std::io::Write;
-    let dir = path
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(std::path::Path::new("."));
-    let mut tmp = tempfile::NamedTempFile::new_in(dir)
-        .with_context(|| format!("cannot write {}", path.display()))?;
-    tmp.write_all(bytes)?;
-    tmp.as_file().sync_all()?;
-    tmp.persist(path)
-        .map_err(|e| anyhow::anyhow!("cannot write {}: {}", path.display(), e.error))?;
-    Ok(())
+    let err = |e: &dyn std::fmt::Display| anyhow::anyhow!("cannot write {}: {e}", path.display());
+    let mut file = tessera_format::AtomicFile::create(path, 1 << 16).map_err(|e| err(&e.source))?;
+    file.write_all(bytes).map_err(|e| err(&e))?;
+    file.commit().map_err(|e| err(&e.source))
 }

@@ -483,7 +483,7 @@ fn extract_writes_the_cut_and_reports_it() {
     assert_eq!(ply.positions.len(), mesh.positions.len());
     assert_eq!(ply.triangles.len(), mesh.triangle_count());
     for (k, q) in mesh.positions.iter().enumerate() {
-        let p = m.model_position(*q);
+        let p = m.grid().position(*q);
         assert_eq!(
             ply.positions[k],
             [p[0] as f32, p[1] as f32, p[2] as f32],

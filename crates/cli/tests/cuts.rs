@@ -456,7 +456,7 @@ fn max_distance_to_cut(
     let pos: Vec<[f64; 3]> = mesh
         .positions
         .iter()
-        .map(|&q| m.model_position(q))
+        .map(|&q| m.grid().position(q))
         .collect();
     let tris: Vec<[[f64; 3]; 3]> = mesh
         .indices
@@ -485,7 +485,7 @@ fn coarse_cuts_are_within_their_recorded_error() {
     let h = *m.header();
     let input = read_input(&built.input);
     let patches = decode_all(m);
-    let step = m.quant_step();
+    let step = m.grid().step();
     let mut report = Vec::new();
     for level in [0u8, 2] {
         let nodes = uniform_level_cut(m.nodes(), level);

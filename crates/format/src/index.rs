@@ -19,6 +19,7 @@ use bytemuck::Zeroable;
 
 use crate::codec::{self, PatchData};
 use crate::error::FormatError;
+use crate::grid::Grid;
 use crate::records::{header_crc32, Header, NodeRecord, FORMAT_VERSION, MAGIC, NO_NODE};
 
 /// Bytes of the header.
@@ -219,20 +220,9 @@ impl ModelIndex {
         self.decode_patch(i, &bytes)
     }
 
-    /// Edge length of one grid cell, model units: `cube_size / 2^quant_bits`.
-    pub fn quant_step(&self) -> f64 {
-        self.header.cube_size / (self.header.quant_bits as f64).exp2()
-    }
-
-    /// Model-space position of grid point `q`: `cube_origin + q * quant_step()`.
-    pub fn model_position(&self, q: [u32; 3]) -> [f64; 3] {
-        let s = self.quant_step();
-        let o = self.header.cube_origin;
-        [
-            o[0] + q[0] as f64 * s,
-            o[1] + q[1] as f64 * s,
-            o[2] + q[2] as f64 * s,
-        ]
+    /// The quantisation grid of the model's positions.
+    pub fn grid(&self) -> Grid {
+        Grid::of_header(&self.header)
     }
 }
 

@@ -61,8 +61,8 @@ fn round_trip() {
         assert_patch_eq(&m.decode_patch(i).unwrap(), &f.patches[i]);
         m.advise_willneed(i);
     }
-    assert!((m.quant_step() - 0.001).abs() < 1e-15);
-    assert_eq!(m.model_position([0, 1000, 5000]), [1000.0, 2001.0, 0.0]);
+    assert!((m.grid().step() - 0.001).abs() < 1e-15);
+    assert_eq!(m.grid().position([0, 1000, 5000]), [1000.0, 2001.0, 0.0]);
     let report = verify_structure(&m);
     assert!(report.is_valid(), "{:?}", report.problems);
     assert_eq!(report.checked_nodes, 4);

@@ -117,7 +117,7 @@ impl Viewer {
                 read_delay: opts.read_delay,
             },
         );
-        let quant_step = model.quant_step();
+        let quant_step = model.grid().step();
         let mut v = Viewer {
             gpu,
             renderer,

@@ -10,7 +10,7 @@
 
 use std::collections::HashMap;
 
-use crate::hash::FxBuildHasher;
+use rustc_hash::FxBuildHasher;
 
 /// Counts over the triangles of a mesh, after welding vertices by position.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]

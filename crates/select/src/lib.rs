@@ -23,7 +23,6 @@ pub mod camera;
 pub mod edges;
 #[cfg(feature = "extract")]
 pub mod extract;
-mod hash;
 pub mod merge;
 pub mod path;
 pub mod residency;

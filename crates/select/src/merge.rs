@@ -11,7 +11,7 @@
 
 use std::collections::HashMap;
 
-use crate::hash::FxBuildHasher;
+use rustc_hash::FxBuildHasher;
 
 /// One decoded patch, borrowed. An attribute slice is either empty (the model does not
 /// carry that attribute) or as long as `positions`.
