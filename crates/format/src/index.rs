@@ -69,6 +69,21 @@ impl ByteSource for Vec<u8> {
     }
 }
 
+/// A model whose patches any thread can read: its index and a blocking read + decode
+/// of one node's patch. What loader threads work on; implemented by the memory-mapped
+/// [`crate::Model`] (feature `mmap`) and by remote models (HTTP ranges).
+pub trait PatchReader: Send + Sync {
+    /// The model's index.
+    fn index(&self) -> &ModelIndex;
+    /// Reads, checks and decodes node `i`'s patch (blocking).
+    fn decode_patch(&self, i: usize) -> Result<PatchData, FormatError>;
+    /// A hint that node `i`'s patch will be read soon (e.g. kernel read-ahead).
+    /// Default: nothing.
+    fn advise(&self, i: usize) {
+        let _ = i;
+    }
+}
+
 fn invalid_header(detail: impl Into<String>) -> FormatError {
     FormatError::InvalidHeader {
         detail: detail.into(),

@@ -35,7 +35,7 @@ pub use codec::{
 };
 pub use error::FormatError;
 pub use grid::Grid;
-pub use index::{ByteSource, ModelIndex, HEADER_BYTES, NODE_BYTES};
+pub use index::{ByteSource, ModelIndex, PatchReader, HEADER_BYTES, NODE_BYTES};
 #[cfg(feature = "mmap")]
 pub use reader::{MappedFile, Model};
 pub use records::{

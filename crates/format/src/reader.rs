@@ -19,7 +19,7 @@ use memmap2::{Advice, Mmap};
 
 use crate::codec::PatchData;
 use crate::error::FormatError;
-use crate::index::{ByteSource, ModelIndex};
+use crate::index::{ByteSource, ModelIndex, PatchReader};
 
 /// A read-only memory map of a model file, as a [`ByteSource`].
 #[derive(Debug)]
@@ -123,5 +123,17 @@ impl Model {
                 );
             }
         }
+    }
+}
+
+impl PatchReader for Model {
+    fn index(&self) -> &ModelIndex {
+        &self.index
+    }
+    fn decode_patch(&self, i: usize) -> Result<PatchData, FormatError> {
+        Model::decode_patch(self, i)
+    }
+    fn advise(&self, i: usize) {
+        self.advise_willneed(i);
     }
 }

@@ -1,5 +1,6 @@
-//! Asynchronous paging of model patches from a local file: the frame never waits on
-//! disk. A [`Pager`] is the memory-mapped [`PatchSource`] of `tessera-stream`.
+//! Asynchronous paging of model patches: the frame never waits on disk (or network).
+//! A [`Pager`] is a [`PatchSource`] of `tessera-stream` over any [`PatchReader`]: the
+//! memory-mapped local `Model`, or a remote one.
 //!
 //! Following GoLD §4.1 (asynchronous paging), the render thread only ever *asks* for
 //! patches and *collects* finished ones; reading, CRC checking and decoding happen on
@@ -8,7 +9,7 @@
 //! - a priority queue of wanted nodes, replaced wholesale by every [`Pager::request`]
 //!   (so stale wants from earlier frames are cancelled);
 //! - loader thread(s) that pop the highest-priority node, read + decode it with
-//!   [`Model::decode_patch`] and publish the result;
+//!   [`PatchReader::decode_patch`] and publish the result;
 //! - the list of answers drained by [`Pager::poll`].
 //!
 //! Which patches stay in RAM, and for how long, is the streaming core's decision
@@ -38,7 +39,7 @@ use std::time::Duration;
 
 use rayon::prelude::*;
 use rustc_hash::FxHashSet;
-use tessera_format::Model;
+use tessera_format::PatchReader;
 use tessera_stream::{Answer, PatchSource};
 
 use crate::loader::{Queued, Shared, State};
@@ -81,8 +82,9 @@ pub struct Pager {
 }
 
 impl Pager {
-    /// Starts `opts.threads` loader threads (at least one) for `model`.
-    pub fn new(model: Arc<Model>, opts: PagerOptions) -> Pager {
+    /// Starts `opts.threads` loader threads (at least one) reading `model` (a local
+    /// memory-mapped `Model`, or any other [`PatchReader`]).
+    pub fn new(model: Arc<dyn PatchReader>, opts: PagerOptions) -> Pager {
         let shared = Arc::new(Shared {
             model,
             read_delay: opts.read_delay,
@@ -141,7 +143,7 @@ impl Pager {
     /// nothing.
     pub fn advise(&self, nodes: &[u32]) {
         for &n in nodes {
-            self.shared.model.advise_willneed(n as usize);
+            self.shared.model.advise(n as usize);
         }
     }
 
@@ -170,7 +172,7 @@ impl Pager {
     }
 
     /// The model being paged.
-    pub fn model(&self) -> &Arc<Model> {
+    pub fn model(&self) -> &Arc<dyn PatchReader> {
         &self.shared.model
     }
 

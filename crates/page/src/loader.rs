@@ -10,7 +10,7 @@ use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 use rustc_hash::FxHashSet;
-use tessera_format::Model;
+use tessera_format::PatchReader;
 use tessera_stream::Answer;
 
 use crate::PagerStats;
@@ -56,7 +56,7 @@ pub(crate) struct State {
 }
 
 pub(crate) struct Shared {
-    pub model: Arc<Model>,
+    pub model: Arc<dyn PatchReader>,
     pub read_delay: Option<Duration>,
     pub state: Mutex<State>,
     pub wake: Condvar,

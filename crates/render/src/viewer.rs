@@ -11,7 +11,7 @@
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use tessera_format::{Model, ATTR_COLORS};
+use tessera_format::{PatchReader, ATTR_COLORS};
 use tessera_page::{Pager, PagerOptions};
 use tessera_select::Camera;
 use tessera_stream::{CompleteError, Scheduler, SchedulerOptions};
@@ -71,7 +71,7 @@ pub struct Viewer {
     gpu: Gpu,
     renderer: Renderer,
     cache: GpuCache,
-    model: Arc<Model>,
+    model: Arc<dyn PatchReader>,
     scheduler: Scheduler,
     pager: Pager,
     opts: ViewerOptions,
@@ -80,8 +80,9 @@ pub struct Viewer {
 }
 
 impl Viewer {
-    /// Opens a viewer on `model` with its own headless device.
-    pub fn new(model: Arc<Model>, opts: ViewerOptions) -> Result<Viewer, RenderError> {
+    /// Opens a viewer on `model` (a local `Model` or any other [`PatchReader`]) with its
+    /// own headless device.
+    pub fn new(model: Arc<dyn PatchReader>, opts: ViewerOptions) -> Result<Viewer, RenderError> {
         let gpu = Gpu::headless()?;
         Self::with_gpu(gpu, model, opts)
     }
@@ -90,12 +91,12 @@ impl Viewer {
     /// uploaded now (the first frame shows the whole model at its coarsest level).
     pub fn with_gpu(
         gpu: Gpu,
-        model: Arc<Model>,
+        model: Arc<dyn PatchReader>,
         opts: ViewerOptions,
     ) -> Result<Viewer, RenderError> {
         let mut renderer = Renderer::new(&gpu.device, wgpu::TextureFormat::Rgba8Unorm);
         renderer.background = opts.background;
-        renderer.has_colors = model.header().attributes & ATTR_COLORS != 0;
+        renderer.has_colors = model.index().header().attributes & ATTR_COLORS != 0;
         let cache = GpuCache::new(&gpu.device, opts.gpu_budget_bytes);
         let scheduler = Scheduler::new(
             model.index(),
@@ -117,7 +118,7 @@ impl Viewer {
                 read_delay: opts.read_delay,
             },
         );
-        let quant_step = model.grid().step();
+        let quant_step = model.index().grid().step();
         let mut v = Viewer {
             gpu,
             renderer,
@@ -145,7 +146,7 @@ impl Viewer {
     }
 
     /// The model.
-    pub fn model(&self) -> &Arc<Model> {
+    pub fn model(&self) -> &Arc<dyn PatchReader> {
         &self.model
     }
 
@@ -170,7 +171,7 @@ impl Viewer {
         let t0 = Instant::now();
         self.renderer
             .ensure_offscreen(&self.gpu.device, camera.width, camera.height);
-        let h = self.model.header();
+        let h = self.model.index().header();
         let params = FrameParams::new(camera, h.cube_origin, h.bounding_sphere);
         self.renderer.set_frame(&self.gpu.queue, &params);
         let (color, depth) = self
