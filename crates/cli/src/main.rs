@@ -8,6 +8,7 @@ mod cmd_extract;
 mod cmd_gen;
 mod cmd_info;
 mod cmd_render;
+mod cmd_serve;
 mod cmd_verify;
 mod progress;
 
@@ -39,6 +40,8 @@ enum Command {
     Gen(cmd_gen::Args),
     /// Render a camera path or an orbit to PNG frames with per-frame statistics.
     Render(cmd_render::Args),
+    /// Serve models over HTTP: range requests, ETags, CORS, a JSON catalogue.
+    Serve(cmd_serve::Args),
 }
 
 fn main() -> ExitCode {
@@ -66,6 +69,7 @@ fn main() -> ExitCode {
         Command::Extract(a) => cmd_extract::run(a),
         Command::Gen(a) => cmd_gen::run(a),
         Command::Render(a) => cmd_render::run(a),
+        Command::Serve(a) => cmd_serve::run(a),
     };
     match result {
         Ok(code) => code,

@@ -1,0 +1,38 @@
+//! `tessera serve`: serve models over HTTP (ranges, ETags, CORS, a JSON catalogue) with
+//! `tessera_serve`; runs until Ctrl-C.
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// Model files (.tsr) and directories (every .tsr in them, rescanned for new builds).
+    #[arg(required = true, value_name = "MODEL_OR_DIR")]
+    inputs: Vec<PathBuf>,
+    /// Address to listen on; port 0 picks a free port (the bound address is printed).
+    #[arg(long, default_value = "127.0.0.1:8080")]
+    addr: SocketAddr,
+    /// Most connections served at once (more wait in the listen backlog).
+    #[arg(long, default_value_t = 512)]
+    max_connections: usize,
+}
+
+pub fn run(a: Args) -> anyhow::Result<ExitCode> {
+    let opts = tessera_serve::ServeOptions {
+        addr: a.addr,
+        max_connections: a.max_connections,
+        ..Default::default()
+    };
+    tessera_serve::serve_blocking(&a.inputs, opts, |server| {
+        let addr = server.local_addr();
+        let names = server.model_names();
+        let s = if names.len() == 1 { "" } else { "s" };
+        println!("serving {} model{s} at http://{addr}/", names.len());
+        for n in &names {
+            println!("  http://{addr}/models/{n}");
+        }
+        println!("catalogue: http://{addr}/api/models (Ctrl-C stops; TESSERA_LOG=info logs every request)");
+    })?;
+    Ok(ExitCode::SUCCESS)
+}

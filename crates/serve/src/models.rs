@@ -1,0 +1,384 @@
+//! The served set: which names map to which files, and what their headers say.
+//!
+//! Requests are resolved by looking a decoded name up in this set, never by joining a
+//! request path onto the file system. The set is built at startup from the inputs
+//! (model files and directories) and rebuilt from them by [`Models::rescan`] (on every
+//! catalogue request and periodically), so new builds in a served directory appear and
+//! removed ones disappear.
+
+use std::collections::{BTreeMap, HashSet};
+use std::fs::File;
+use std::hash::{Hash, Hasher};
+use std::io;
+use std::os::unix::fs::{FileExt, MetadataExt, OpenOptionsExt};
+use std::path::{Path, PathBuf};
+use std::sync::{Mutex, RwLock};
+use std::time::{Duration, SystemTime};
+
+use tessera_format::{ModelIndex, HEADER_BYTES};
+
+/// A file's identity: a new build renamed over the old one changes the inode (and
+/// usually the size and mtime), an in-place rewrite changes size or mtime.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct Identity {
+    dev: u64,
+    ino: u64,
+    size: u64,
+    mtime_s: i64,
+    mtime_ns: i64,
+}
+
+impl Identity {
+    pub fn of(meta: &std::fs::Metadata) -> Identity {
+        Identity {
+            dev: meta.dev(),
+            ino: meta.ino(),
+            size: meta.size(),
+            mtime_s: meta.mtime(),
+            mtime_ns: meta.mtime_nsec(),
+        }
+    }
+
+    pub fn size(&self) -> u64 {
+        self.size
+    }
+
+    /// The strong entity tag: the size and a hash of the identity (not the raw device
+    /// and inode numbers, which are nobody's business), quoted.
+    pub fn etag(&self) -> String {
+        // SipHash with fixed keys: the same file gives the same tag across restarts.
+        #[allow(deprecated)]
+        let mut h =
+            std::hash::SipHasher::new_with_keys(0x7465_7373_6572_6121, 0x6574_6167_2d76_3101);
+        self.hash(&mut h);
+        format!("\"{:x}-{:016x}\"", self.size, h.finish())
+    }
+
+    /// Modification time, whole seconds (what `Last-Modified` can say).
+    pub fn modified(&self) -> SystemTime {
+        if self.mtime_s >= 0 {
+            SystemTime::UNIX_EPOCH + Duration::from_secs(self.mtime_s as u64)
+        } else {
+            SystemTime::UNIX_EPOCH - Duration::from_secs(self.mtime_s.unsigned_abs())
+        }
+    }
+}
+
+/// What the catalogue says about a model, from its header.
+#[derive(Clone, Debug)]
+pub struct ModelInfo {
+    pub identity: Identity,
+    pub triangles: u64,
+    pub bounding_sphere: [f64; 4],
+    pub format_version: u32,
+    pub nodes: u64,
+}
+
+/// One served file.
+#[derive(Clone, Debug)]
+pub struct Entry {
+    /// The file to open for each request. For files found in a served directory, the
+    /// canonical path (no symbolic link in it), opened with `O_NOFOLLOW`.
+    pub path: PathBuf,
+    pub from_dir: bool,
+    /// The header as last validated (for the identity it names).
+    pub info: ModelInfo,
+}
+
+/// The inputs and the current served set, by URL name (the file name).
+pub struct Models {
+    files: Vec<PathBuf>,
+    /// Canonical directory paths.
+    dirs: Vec<PathBuf>,
+    set: RwLock<BTreeMap<String, Entry>>,
+    /// Warnings already logged (so a rescan every few seconds does not repeat them).
+    warned: Mutex<HashSet<String>>,
+}
+
+/// Why the inputs give no served set at all.
+#[derive(Debug)]
+pub enum StartError {
+    Input {
+        path: PathBuf,
+        source: io::Error,
+    },
+    NameClash {
+        name: String,
+        first: PathBuf,
+        second: PathBuf,
+    },
+    NoModels {
+        skipped: Vec<String>,
+    },
+}
+
+/// A name can be served if it is a plain, visible file name: no separators, no control
+/// characters, not hidden (the atomic writer's temporary files are `.NAME.tmp-...`).
+pub fn servable_name(name: &str) -> bool {
+    !name.is_empty()
+        && !name.starts_with('.')
+        && !name
+            .chars()
+            .any(|c| c == '/' || c == '\\' || c.is_control())
+}
+
+struct Scan {
+    set: BTreeMap<String, Entry>,
+    /// One line per input file skipped.
+    skipped: Vec<String>,
+    clashes: Vec<(String, PathBuf, PathBuf)>,
+}
+
+impl Models {
+    /// Checks the inputs and builds the first served set; an error if an input does not
+    /// exist, two models share a name, or no input holds a valid model.
+    pub fn open(inputs: &[PathBuf]) -> Result<Models, StartError> {
+        let mut files = Vec::new();
+        let mut dirs = Vec::new();
+        for p in inputs {
+            let meta = std::fs::metadata(p).map_err(|source| StartError::Input {
+                path: p.clone(),
+                source,
+            })?;
+            if meta.is_dir() {
+                let c = std::fs::canonicalize(p).map_err(|source| StartError::Input {
+                    path: p.clone(),
+                    source,
+                })?;
+                dirs.push(c);
+            } else {
+                files.push(p.clone());
+            }
+        }
+        let models = Models {
+            files,
+            dirs,
+            set: RwLock::new(BTreeMap::new()),
+            warned: Mutex::new(HashSet::new()),
+        };
+        let scan = models.scan(&BTreeMap::new());
+        if let Some((name, first, second)) = scan.clashes.into_iter().next() {
+            return Err(StartError::NameClash {
+                name,
+                first,
+                second,
+            });
+        }
+        for s in &scan.skipped {
+            models.warn_once(s);
+        }
+        if scan.set.is_empty() {
+            return Err(StartError::NoModels {
+                skipped: scan.skipped,
+            });
+        }
+        *models.set.write().unwrap_or_else(|e| e.into_inner()) = scan.set;
+        Ok(models)
+    }
+
+    /// Rebuilds the served set from the inputs (blocking: it lists directories and reads
+    /// headers of new or changed files).
+    pub fn rescan(&self) {
+        let old = self.snapshot();
+        let scan = self.scan(&old);
+        for s in &scan.skipped {
+            self.warn_once(s);
+        }
+        for (name, first, second) in &scan.clashes {
+            self.warn_once(&format!(
+                "{}: not served: a model named {name} is served from {}",
+                second.display(),
+                first.display()
+            ));
+        }
+        *self.set.write().unwrap_or_else(|e| e.into_inner()) = scan.set;
+    }
+
+    /// The current set.
+    pub fn snapshot(&self) -> BTreeMap<String, Entry> {
+        self.set.read().unwrap_or_else(|e| e.into_inner()).clone()
+    }
+
+    /// The entry served under `name`, if any.
+    pub fn lookup(&self, name: &str) -> Option<Entry> {
+        self.set
+            .read()
+            .unwrap_or_else(|e| e.into_inner())
+            .get(name)
+            .cloned()
+    }
+
+    /// Records that `name` now has `info` (it was revalidated at request time).
+    pub fn update(&self, name: &str, info: ModelInfo) {
+        if let Some(e) = self
+            .set
+            .write()
+            .unwrap_or_else(|e| e.into_inner())
+            .get_mut(name)
+        {
+            e.info = info;
+        }
+    }
+
+    /// Logs a warning unless the same one was logged before.
+    pub fn warn_once(&self, msg: &str) {
+        let mut w = self.warned.lock().unwrap_or_else(|e| e.into_inner());
+        if w.len() > 10_000 {
+            w.clear();
+        }
+        if w.insert(msg.to_string()) {
+            tracing::warn!("{msg}");
+        }
+    }
+
+    fn scan(&self, old: &BTreeMap<String, Entry>) -> Scan {
+        let mut scan = Scan {
+            set: BTreeMap::new(),
+            skipped: Vec::new(),
+            clashes: Vec::new(),
+        };
+        for f in &self.files {
+            let Some(name) = f.file_name().and_then(|n| n.to_str()).map(str::to_string) else {
+                scan.skipped
+                    .push(format!("{}: skipped: not a UTF-8 file name", f.display()));
+                continue;
+            };
+            if !servable_name(&name) {
+                scan.skipped.push(format!(
+                    "{}: skipped: hidden or unusable file name",
+                    f.display()
+                ));
+                continue;
+            }
+            self.consider(&mut scan, old, name, f.clone(), false);
+        }
+        for d in &self.dirs {
+            let entries = match std::fs::read_dir(d) {
+                Ok(e) => e,
+                Err(e) => {
+                    scan.skipped
+                        .push(format!("{}: cannot list directory: {e}", d.display()));
+                    continue;
+                }
+            };
+            let mut names: Vec<(String, PathBuf)> = Vec::new();
+            for e in entries.flatten() {
+                let path = e.path();
+                let Some(name) = e.file_name().to_str().map(str::to_string) else {
+                    continue;
+                };
+                if !name.ends_with(".tsr") || !servable_name(&name) {
+                    continue;
+                }
+                names.push((name, path));
+            }
+            names.sort();
+            for (name, path) in names {
+                // Only what really lies in the directory: a symbolic link is followed
+                // only if its target is inside the (canonical) served directory.
+                let canonical = match std::fs::canonicalize(&path) {
+                    Ok(c) => c,
+                    Err(e) => {
+                        scan.skipped
+                            .push(format!("{}: skipped: {e}", path.display()));
+                        continue;
+                    }
+                };
+                if !canonical.starts_with(d) {
+                    scan.skipped.push(format!(
+                        "{}: skipped: it points outside the served directory {}",
+                        path.display(),
+                        d.display()
+                    ));
+                    continue;
+                }
+                self.consider(&mut scan, old, name, canonical, true);
+            }
+        }
+        scan
+    }
+
+    fn consider(
+        &self,
+        scan: &mut Scan,
+        old: &BTreeMap<String, Entry>,
+        name: String,
+        path: PathBuf,
+        from_dir: bool,
+    ) {
+        if let Some(first) = scan.set.get(&name) {
+            if first.path != path {
+                scan.clashes.push((name, first.path.clone(), path));
+            }
+            return;
+        }
+        let file = match open_model(&path, from_dir) {
+            Ok(f) => f,
+            Err(e) => {
+                scan.skipped
+                    .push(format!("{}: skipped: {e}", path.display()));
+                return;
+            }
+        };
+        let known = old
+            .get(&name)
+            .filter(|e| e.path == path)
+            .map(|e| e.info.clone());
+        match validate(&file, known.as_ref()) {
+            Ok(info) => {
+                scan.set.insert(
+                    name,
+                    Entry {
+                        path,
+                        from_dir,
+                        info,
+                    },
+                );
+            }
+            Err(why) => scan
+                .skipped
+                .push(format!("{}: skipped: {why}", path.display())),
+        }
+    }
+}
+
+/// Opens a served file for reading: never through a symbolic link for directory
+/// entries (their path is canonical), and only regular files.
+pub fn open_model(path: &Path, from_dir: bool) -> io::Result<File> {
+    let mut o = std::fs::OpenOptions::new();
+    o.read(true);
+    if from_dir {
+        o.custom_flags(libc::O_NOFOLLOW);
+    }
+    let f = o.open(path)?;
+    if !f.metadata()?.is_file() {
+        return Err(io::Error::other("not a regular file"));
+    }
+    Ok(f)
+}
+
+/// The model's header facts for the file open as `file` (stat and header read from that
+/// one descriptor); `known` is reused when the identity has not changed.
+pub fn validate(file: &File, known: Option<&ModelInfo>) -> Result<ModelInfo, String> {
+    let meta = file.metadata().map_err(|e| e.to_string())?;
+    if !meta.is_file() {
+        return Err("not a regular file".into());
+    }
+    let identity = Identity::of(&meta);
+    if let Some(k) = known.filter(|k| k.identity == identity) {
+        return Ok(k.clone());
+    }
+    let want = HEADER_BYTES.min(identity.size) as usize;
+    let mut prefix = vec![0u8; want];
+    file.read_exact_at(&mut prefix, 0)
+        .map_err(|e| format!("reading the header: {e}"))?;
+    let h = ModelIndex::parse_header(&prefix, identity.size)
+        .map_err(|e| format!("not a valid model: {e}"))?;
+    Ok(ModelInfo {
+        identity,
+        triangles: h.input_triangles,
+        bounding_sphere: h.bounding_sphere,
+        format_version: h.version,
+        nodes: h.node_count,
+    })
+}
