@@ -79,6 +79,7 @@ mod tests {
                 triangles: 20_000,
                 ..Default::default()
             },
+            &tessera_gen::NoProgress,
         )
         .unwrap();
         let out = dir.join("m.tsr");

@@ -14,6 +14,7 @@ fn sphere(dir: &Path) -> std::path::PathBuf {
             colors: true,
             ..Default::default()
         },
+        &tessera_gen::NoProgress,
     )
     .unwrap();
     input

@@ -87,7 +87,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
             colors,
             noise,
             ..
-        } => tessera_gen::write_sphere_with_progress(
+        } => tessera_gen::write_sphere(
             &output,
             &SphereOptions {
                 triangles,
@@ -102,7 +102,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
             seed,
             colors,
             ..
-        } => tessera_gen::write_terrain_with_progress(
+        } => tessera_gen::write_terrain(
             &output,
             &TerrainOptions {
                 triangles,
@@ -112,7 +112,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
             &bars,
         ),
         What::Tile { input, copies, .. } => {
-            tessera_gen::write_tiled_with_progress(&input, &output, &TileOptions { copies }, &bars)
+            tessera_gen::write_tiled(&input, &output, &TileOptions { copies }, &bars)
         }
     }
     .with_context(|| format!("generating {}", output.display()))?;

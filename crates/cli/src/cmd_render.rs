@@ -121,8 +121,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     }
     // The kernel's high-water mark also sees peaks inside a frame, which the per-frame
     // samples above miss.
-    let peak_rss =
-        tessera_build::peak_rss_bytes().unwrap_or_else(tessera_build::current_rss_bytes);
+    let peak_rss = tessera_build::peak_rss_bytes().unwrap_or_else(tessera_build::current_rss_bytes);
     let n = all.len().max(1) as f64;
     let mean = |f: &dyn Fn(&FrameStats) -> f64| all.iter().map(f).sum::<f64>() / n;
     let mut sorted: Vec<f64> = all.iter().map(|s| s.frame_ms).collect();

@@ -311,6 +311,7 @@ fn build_rejects_bad_input_cleanly() {
             triangles: 2000,
             ..Default::default()
         },
+        &tessera_gen::NoProgress,
     )
     .unwrap();
     let sphere_bytes = std::fs::read(&sphere).unwrap();
@@ -851,6 +852,7 @@ fn timed_build_fixture() -> (tempfile::TempDir, PathBuf, PathBuf, std::time::Dur
             triangles: 600_000,
             ..Default::default()
         },
+        &tessera_gen::NoProgress,
     )
     .unwrap();
     let output = dir.path().join("model.tsr");

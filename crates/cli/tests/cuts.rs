@@ -622,6 +622,7 @@ fn crack_free_cuts_terrain_40k() {
             seed: 8,
             colors: true,
         },
+        &tessera_gen::NoProgress,
     )
     .unwrap();
     let built = build_file(dir, input, &small_options());
@@ -716,6 +717,7 @@ fn crack_free_cuts_sweep() {
                     seed,
                     colors: false,
                 },
+                &tessera_gen::NoProgress,
             )
             .unwrap();
             let built = build_file(dir, input, &small_options());

@@ -26,6 +26,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 colors,
                 ..Default::default()
             },
+            &tessera_gen::NoProgress,
         )?;
         let s = t.elapsed().as_secs_f64();
         println!(
@@ -45,6 +46,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             seed: 0,
             colors: false,
         },
+        &tessera_gen::NoProgress,
     )?;
     let s = t.elapsed().as_secs_f64();
     println!(

@@ -21,6 +21,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 colors: true,
                 ..Default::default()
             },
+            &tessera_gen::NoProgress,
         )?,
         "terrain" => write_terrain(
             out,
@@ -29,6 +30,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 seed,
                 colors: true,
             },
+            &tessera_gen::NoProgress,
         )?,
         other => return Err(format!("unknown generator {other}").into()),
     };

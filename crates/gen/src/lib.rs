@@ -13,20 +13,17 @@
 //! * [`write_terrain`]: an open heightfield with a boundary.
 //! * [`write_tiled`]: K translated copies of a real (small) scan.
 //!
-//! Each has a `_with_progress` form that reports one `generate` stage to a [`Progress`],
-//! the same protocol as the builder's (`tessera-mesh`'s trait).
+//! Each reports one `generate` stage to the [`Progress`] it is given ([`NoProgress`] for
+//! none), the same protocol as the builder's (`tessera-mesh`'s trait).
 
 mod noise;
 mod sphere;
 mod terrain;
 mod tile;
 
-pub use sphere::{sphere_resolution, write_sphere, write_sphere_with_progress, SphereOptions};
-pub use terrain::{
-    terrain_resolution, write_terrain, write_terrain_with_progress, TerrainOptions, MAX_HEIGHT,
-    MIN_HEIGHT,
-};
-pub use tile::{write_tiled, write_tiled_with_progress, TileOptions};
+pub use sphere::{sphere_resolution, write_sphere, SphereOptions};
+pub use terrain::{terrain_resolution, write_terrain, TerrainOptions, MAX_HEIGHT, MIN_HEIGHT};
+pub use tile::{write_tiled, TileOptions};
 
 use tessera_mesh::MeshError;
 pub use tessera_mesh::{NoProgress, Progress};

@@ -13,7 +13,7 @@ use std::path::Path;
 use tessera_mesh::{Attributes, PlyWriter, PlyWriterOptions, Vertex};
 
 use crate::noise::{ramp, Fbm};
-use crate::{stream_vertices, GenError, GenReport, NoProgress, Progress, Ticker};
+use crate::{stream_vertices, GenError, GenReport, Progress, Ticker};
 
 /// Options of [`write_sphere`].
 #[derive(Clone, Debug, PartialEq)]
@@ -72,12 +72,9 @@ pub fn sphere_resolution(triangles: u64) -> Result<u64, GenError> {
 /// [`sphere_resolution`]; the report gives the exact counts. All vertices are written
 /// before the faces; no normals; colours (opaque) when `opts.colors`. The bytes depend
 /// only on `opts`. Memory use does not depend on the triangle count.
-pub fn write_sphere(path: &Path, opts: &SphereOptions) -> Result<GenReport, GenError> {
-    write_sphere_with_progress(path, opts, &NoProgress)
-}
-
-/// [`write_sphere`] reporting one `generate` stage to `progress` (see [`crate::Progress`]).
-pub fn write_sphere_with_progress(
+///
+/// Reports one `generate` stage to `progress` (see [`crate::Progress`]).
+pub fn write_sphere(
     path: &Path,
     opts: &SphereOptions,
     progress: &dyn Progress,

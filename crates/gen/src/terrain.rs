@@ -5,7 +5,7 @@ use std::path::Path;
 use tessera_mesh::{Attributes, PlyWriter, PlyWriterOptions, Vertex};
 
 use crate::noise::{ramp, Fbm};
-use crate::{stream_vertices, GenError, GenReport, NoProgress, Progress, Ticker};
+use crate::{stream_vertices, GenError, GenReport, Progress, Ticker};
 
 /// Amplitude of the fBm part of the height.
 const FBM_AMPLITUDE: f64 = 0.1;
@@ -69,12 +69,9 @@ pub fn terrain_resolution(triangles: u64) -> Result<u64, GenError> {
 /// boundary is the `4 (m - 1)` edges of the square's border. Colours (by height, opaque)
 /// when `opts.colors`; no normals. The bytes depend only on `opts`; memory use does not
 /// depend on the triangle count.
-pub fn write_terrain(path: &Path, opts: &TerrainOptions) -> Result<GenReport, GenError> {
-    write_terrain_with_progress(path, opts, &NoProgress)
-}
-
-/// [`write_terrain`] reporting one `generate` stage to `progress` (see [`crate::Progress`]).
-pub fn write_terrain_with_progress(
+///
+/// Reports one `generate` stage to `progress` (see [`crate::Progress`]).
+pub fn write_terrain(
     path: &Path,
     opts: &TerrainOptions,
     progress: &dyn Progress,

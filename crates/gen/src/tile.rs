@@ -6,7 +6,7 @@ use tessera_mesh::{
     read_mesh, Attributes, MeshError, MeshHeader, MeshVisitor, PlyWriter, PlyWriterOptions, Vertex,
 };
 
-use crate::{GenError, GenReport, NoProgress, Progress, Ticker};
+use crate::{GenError, GenReport, Progress, Ticker};
 
 /// Options of [`write_tiled`].
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -35,12 +35,9 @@ impl Default for TileOptions {
 /// input's attributes (normals, colours, uvs) are kept. Fails with
 /// [`GenError::InvalidArgument`] when `copies` is 0 or the output would have more than
 /// `u32::MAX` vertices, with [`GenError::Mesh`] when the input cannot be read.
-pub fn write_tiled(input: &Path, output: &Path, opts: &TileOptions) -> Result<GenReport, GenError> {
-    write_tiled_with_progress(input, output, opts, &NoProgress)
-}
-
-/// [`write_tiled`] reporting one `generate` stage to `progress` (see [`crate::Progress`]).
-pub fn write_tiled_with_progress(
+///
+/// Reports one `generate` stage to `progress` (see [`crate::Progress`]).
+pub fn write_tiled(
     input: &Path,
     output: &Path,
     opts: &TileOptions,

@@ -171,7 +171,7 @@ fn spheres_are_closed_oriented_manifolds() {
             seed,
             ..Default::default()
         };
-        let report = write_sphere(&path, &opts).unwrap();
+        let report = write_sphere(&path, &opts, &tessera_gen::NoProgress).unwrap();
         let n = sphere_resolution(requested).unwrap();
         assert_eq!(report.triangles, 12 * n * n);
         assert_eq!(report.vertices, 6 * n * n + 2);
@@ -198,6 +198,7 @@ fn sphere_is_bumpy_and_noise_zero_is_round() {
             noise: 0.1,
             ..Default::default()
         },
+        &tessera_gen::NoProgress,
     )
     .unwrap();
     let m = load(&bumpy);
@@ -217,6 +218,7 @@ fn sphere_is_bumpy_and_noise_zero_is_round() {
             noise: 0.0,
             ..Default::default()
         },
+        &tessera_gen::NoProgress,
     )
     .unwrap();
     let m = load(&round);
@@ -234,6 +236,7 @@ fn sphere_colors() {
             colors: true,
             ..Default::default()
         },
+        &tessera_gen::NoProgress,
     )
     .unwrap();
     let m = load(&path);
@@ -265,9 +268,9 @@ fn generators_are_deterministic() {
         colors: true,
         ..Default::default()
     };
-    write_sphere(&p("a.ply"), &s(5)).unwrap();
-    write_sphere(&p("b.ply"), &s(5)).unwrap();
-    write_sphere(&p("c.ply"), &s(6)).unwrap();
+    write_sphere(&p("a.ply"), &s(5), &tessera_gen::NoProgress).unwrap();
+    write_sphere(&p("b.ply"), &s(5), &tessera_gen::NoProgress).unwrap();
+    write_sphere(&p("c.ply"), &s(6), &tessera_gen::NoProgress).unwrap();
     let read = |name: &str| std::fs::read(p(name)).unwrap();
     assert_eq!(read("a.ply"), read("b.ply"));
     assert_ne!(read("a.ply"), read("c.ply"));
@@ -277,9 +280,9 @@ fn generators_are_deterministic() {
         seed,
         colors: true,
     };
-    write_terrain(&p("ta.ply"), &t(5)).unwrap();
-    write_terrain(&p("tb.ply"), &t(5)).unwrap();
-    write_terrain(&p("tc.ply"), &t(6)).unwrap();
+    write_terrain(&p("ta.ply"), &t(5), &tessera_gen::NoProgress).unwrap();
+    write_terrain(&p("tb.ply"), &t(5), &tessera_gen::NoProgress).unwrap();
+    write_terrain(&p("tc.ply"), &t(6), &tessera_gen::NoProgress).unwrap();
     assert_eq!(read("ta.ply"), read("tb.ply"));
     assert_ne!(read("ta.ply"), read("tc.ply"));
 }
@@ -298,6 +301,7 @@ fn golden_bytes() {
             colors: true,
             noise: 0.05,
         },
+        &tessera_gen::NoProgress,
     )
     .unwrap();
     let t = dir.path().join("t.ply");
@@ -308,6 +312,7 @@ fn golden_bytes() {
             seed: 42,
             colors: true,
         },
+        &tessera_gen::NoProgress,
     )
     .unwrap();
     let hs = fnv1a(&std::fs::read(&s).unwrap());
@@ -334,6 +339,7 @@ fn terrain_is_an_open_grid() {
                 seed: 9,
                 colors,
             },
+            &tessera_gen::NoProgress,
         )
         .unwrap();
         let mm = terrain_resolution(requested).unwrap();
@@ -422,7 +428,13 @@ fn tile_copies_and_translates() {
     let src = load(&input);
     for copies in [1u32, 2, 5] {
         let out = dir.path().join(format!("tiled{copies}.ply"));
-        let report = write_tiled(&input, &out, &TileOptions { copies }).unwrap();
+        let report = write_tiled(
+            &input,
+            &out,
+            &TileOptions { copies },
+            &tessera_gen::NoProgress,
+        )
+        .unwrap();
         let k = u64::from(copies);
         assert_eq!(
             report,
@@ -470,7 +482,8 @@ fn invalid_arguments_fail_cleanly() {
                 &SphereOptions {
                     triangles,
                     ..Default::default()
-                }
+                },
+                &tessera_gen::NoProgress
             )),
             "{triangles}"
         );
@@ -481,25 +494,37 @@ fn invalid_arguments_fail_cleanly() {
             noise,
             ..Default::default()
         };
-        assert!(invalid(write_sphere(&out, &o)), "{noise}");
+        assert!(
+            invalid(write_sphere(&out, &o, &tessera_gen::NoProgress)),
+            "{noise}"
+        );
     }
     for triangles in [0, 1, 10_000_000_000, u64::MAX] {
         let o = TerrainOptions {
             triangles,
             ..Default::default()
         };
-        assert!(invalid(write_terrain(&out, &o)), "{triangles}");
+        assert!(
+            invalid(write_terrain(&out, &o, &tessera_gen::NoProgress)),
+            "{triangles}"
+        );
     }
     let input = dir.path().join("tiny.ply");
     write_tiny(&input);
     assert!(invalid(write_tiled(
         &input,
         &out,
-        &TileOptions { copies: 0 }
+        &TileOptions { copies: 0 },
+        &tessera_gen::NoProgress
     )));
     let missing = dir.path().join("missing.ply");
     assert!(matches!(
-        write_tiled(&missing, &out, &TileOptions { copies: 2 }),
+        write_tiled(
+            &missing,
+            &out,
+            &TileOptions { copies: 2 },
+            &tessera_gen::NoProgress
+        ),
         Err(GenError::Mesh(_))
     ));
     // Nothing was written.
@@ -512,6 +537,7 @@ fn invalid_arguments_fail_cleanly() {
             triangles: 3,
             ..Default::default()
         },
+        &tessera_gen::NoProgress,
     )
     .unwrap_err();
     assert!(!e.to_string().contains('\n'));
@@ -526,6 +552,7 @@ fn unwritable_output_is_a_mesh_error() {
             triangles: 1000,
             ..Default::default()
         },
+        &tessera_gen::NoProgress,
     );
     assert!(matches!(r, Err(GenError::Mesh(_))));
 }
@@ -558,7 +585,7 @@ fn progress_is_reported() {
     let dir = tempfile::tempdir().unwrap();
     let rec = Recorder::default();
     let path = dir.path().join("p.ply");
-    let report = write_sphere_with_progress(
+    let report = write_sphere(
         &path,
         &SphereOptions {
             triangles: 1_500_000,

@@ -21,6 +21,7 @@ fn model_path() -> &'static Path {
                 triangles: 50_000,
                 ..Default::default()
             },
+            &tessera_gen::NoProgress,
         )
         .unwrap();
         tessera_build::build(
@@ -86,10 +87,17 @@ fn loads_everything_and_matches_decode() {
         };
         assert!(!seen[*node as usize], "node {node} answered twice");
         seen[*node as usize] = true;
-        assert_eq!(**patch, m.decode_patch(*node as usize).unwrap(), "node {node}");
+        assert_eq!(
+            **patch,
+            m.decode_patch(*node as usize).unwrap(),
+            "node {node}"
+        );
     }
     let s = p.stats();
-    assert_eq!((s.loads, s.failures, s.queued, s.in_flight), (n as u64, 0, 0, 0));
+    assert_eq!(
+        (s.loads, s.failures, s.queued, s.in_flight),
+        (n as u64, 0, 0, 0)
+    );
     // Blocking reads answer in the order asked, with the same patches.
     let order: Vec<u32> = (0..n as u32).rev().collect();
     let now = p.read_blocking(&order);
@@ -100,7 +108,10 @@ fn loads_everything_and_matches_decode() {
         assert_eq!(*node, want);
         assert_eq!(**patch, m.decode_patch(want as usize).unwrap());
     }
-    assert!(matches!(p.read_blocking(&[u32::MAX])[0], Answer::Failed { .. }));
+    assert!(matches!(
+        p.read_blocking(&[u32::MAX])[0],
+        Answer::Failed { .. }
+    ));
 }
 
 #[test]

@@ -13,8 +13,8 @@ mod viewer;
 
 pub use cache::{GpuCache, GpuCacheStats, GpuStore, GpuVertex, Slot};
 pub use gpu::Gpu;
-pub use tessera_image::{diff_stats, enclosed_background_pixels, psnr, Image, ImageError};
 pub use renderer::{FrameParams, Renderer, PATCH_SHADER};
+pub use tessera_image::{diff_stats, enclosed_background_pixels, psnr, Image, ImageError};
 pub use viewer::{FrameStats, Mode, Viewer, ViewerOptions};
 
 /// Errors of the renderer.

@@ -7,8 +7,8 @@ use glam::{DVec3, Mat4};
 use tessera_select::Camera;
 
 use crate::cache::{GpuCache, GpuVertex, Slot};
-use tessera_image::Image;
 use crate::RenderError;
+use tessera_image::Image;
 
 /// The WGSL source of the patch shader (validated by a test with naga, no GPU needed).
 pub const PATCH_SHADER: &str = include_str!("patch.wgsl");

@@ -20,9 +20,9 @@ pub use tessera_stream::{FrameStats, Mode};
 
 use crate::cache::{GpuCache, GpuStore};
 use crate::gpu::Gpu;
-use tessera_image::Image;
 use crate::renderer::{FrameParams, Renderer};
 use crate::RenderError;
+use tessera_image::Image;
 
 /// Options of a [`Viewer`].
 #[derive(Clone, Debug)]
@@ -191,7 +191,14 @@ impl Viewer {
                 let stats = self
                     .scheduler
                     .frame(camera, time_s, &mut self.pager, &mut store);
-                submit_pass(gpu, renderer, (color, depth), store.cache, self.scheduler.draw(), true);
+                submit_pass(
+                    gpu,
+                    renderer,
+                    (color, depth),
+                    store.cache,
+                    self.scheduler.draw(),
+                    true,
+                );
                 stats
             }
             Mode::Complete | Mode::FullResolution => self

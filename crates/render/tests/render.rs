@@ -59,6 +59,7 @@ fn build(input: Option<&Path>, sphere_triangles: u64, opts: &BuildOptions) -> Bu
                     colors: false,
                     noise: 0.05,
                 },
+                &tessera_gen::NoProgress,
             )
             .expect("generate sphere");
             p

@@ -4,9 +4,9 @@
 
 use std::path::{Path, PathBuf};
 
+use crate::camera::{Camera, CameraError, Orbit};
 use glam::DVec3;
 use serde_json::Value;
-use crate::camera::{Camera, CameraError, Orbit};
 
 /// Fields of a path document.
 pub const PATH_FIELDS: [&str; 3] = ["frames", "loop", "keyframes"];

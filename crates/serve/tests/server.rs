@@ -24,6 +24,7 @@ fn built(seed: u64, triangles: u64) -> Vec<u8> {
             colors: false,
             noise: 0.05,
         },
+        &tessera_gen::NoProgress,
     )
     .unwrap();
     tessera_build::build(
@@ -235,7 +236,10 @@ fn catalogue(s: &TestServer) -> serde_json::Value {
 
 fn model_names(catalogue: &serde_json::Value) -> Vec<String> {
     let models = catalogue["models"].as_array().unwrap();
-    models.iter().map(|m| m["name"].as_str().unwrap().to_string()).collect()
+    models
+        .iter()
+        .map(|m| m["name"].as_str().unwrap().to_string())
+        .collect()
 }
 
 struct Rng(u64);

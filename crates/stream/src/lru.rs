@@ -215,10 +215,18 @@ mod tests {
         assert_eq!(c.victim(5, |_| false), Some(1));
         c.touch(1, 5);
         assert_eq!(c.victim(5, |_| false), Some(2));
-        assert_eq!(c.victim(5, |k| k == 3), Some(3), "preferred within the window");
+        assert_eq!(
+            c.victim(5, |k| k == 3),
+            Some(3),
+            "preferred within the window"
+        );
         c.pin(2);
         assert_eq!(c.victim(5, |_| false), Some(3));
-        assert_eq!(c.victim(3, |_| false), None, "3 and 4 are used at or after frame 3");
+        assert_eq!(
+            c.victim(3, |_| false),
+            None,
+            "3 and 4 are used at or after frame 3"
+        );
         assert_eq!(c.unused_since(5), vec![3, 4]);
         // Recency never goes back.
         c.touch(4, 1);

@@ -373,7 +373,9 @@ impl Scheduler {
             match a {
                 Answer::Loaded { node, patch } => {
                     let key = (node, self.groups.of(node), true);
-                    let r = self.res.upload(&self.groups, store, self.frame, key, &patch, &|_| false);
+                    let r = self
+                        .res
+                        .upload(&self.groups, store, self.frame, key, &patch, &|_| false);
                     if let Err(e) = r {
                         tracing::warn!(node, error = ?e, "root patch skipped");
                         self.failed.insert(node);
@@ -418,7 +420,11 @@ impl Scheduler {
                         let bytes = decoded_bytes(&patch);
                         let (admitted, _) = self.ram.admit(node, patch, bytes, self.frame);
                         if !admitted {
-                            tracing::debug!(node, bytes, "patch refused: RAM full of wanted patches");
+                            tracing::debug!(
+                                node,
+                                bytes,
+                                "patch refused: RAM full of wanted patches"
+                            );
                         }
                     }
                 }
@@ -708,7 +714,10 @@ impl Scheduler {
                             let g = groups.of(node);
                             let root = self.nv.nodes()[node as usize].parent == NO_NODE;
                             let key = (node, g, root);
-                            match self.res.upload(groups, store, frame, key, &patch, &|_| false) {
+                            match self
+                                .res
+                                .upload(groups, store, frame, key, &patch, &|_| false)
+                            {
                                 Ok(b) => {
                                     stats.bytes_uploaded += b;
                                     stats.patches_uploaded += 1;

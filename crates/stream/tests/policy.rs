@@ -33,6 +33,7 @@ fn model() -> Arc<Model> {
                 colors: false,
                 noise: 0.05,
             },
+            &tessera_gen::NoProgress,
         )
         .unwrap();
         tessera_build::build(
@@ -325,7 +326,10 @@ fn partly_resident_cuts_are_crack_free() {
         for &n in &draw {
             let g = s.groups().of(n);
             for &x in s.groups().members(g) {
-                assert!(store.held.contains_key(&x), "frame {i}: node {n} drawn, sibling {x} missing");
+                assert!(
+                    store.held.contains_key(&x),
+                    "frame {i}: node {n} drawn, sibling {x} missing"
+                );
             }
         }
         let e = cut_edges(&m, &draw);
@@ -371,7 +375,10 @@ fn the_frame_never_waits() {
     s.frame(&cam, 0.0, &mut src, &mut store);
     assert!(s.draw().is_empty(), "nothing resident yet");
     let asked: FxHashSet<u32> = src.requests[0].iter().map(|&(n, _)| n).collect();
-    assert!((0..roots as u32).all(|r| asked.contains(&r)), "roots requested");
+    assert!(
+        (0..roots as u32).all(|r| asked.contains(&r)),
+        "roots requested"
+    );
     s.frame(&cam, 0.1, &mut src, &mut store);
     assert!(!s.draw().is_empty());
 }
@@ -444,7 +451,11 @@ fn a_stopped_camera_settles() {
         let cam = if i % 2 == 0 { &a } else { &b };
         s.frame(cam, t, &mut src, &mut store);
     }
-    assert_eq!(store.uploads.len(), uploads, "rocking between two views re-uploads");
+    assert_eq!(
+        store.uploads.len(),
+        uploads,
+        "rocking between two views re-uploads"
+    );
     assert_eq!(store.evictions.len(), evictions);
 }
 
@@ -461,7 +472,10 @@ fn nothing_drawn_is_evicted_in_its_frame() {
         })
         .sum();
     let budget = 640u64 << 10;
-    assert!(total > 4 * budget, "model too small for the test: {total} bytes");
+    assert!(
+        total > 4 * budget,
+        "model too small for the test: {total} bytes"
+    );
     let mut s = Scheduler::new(m.index(), options(budget));
     let mut src = TestSource::new(m.clone(), 16).chaotic();
     let mut store = FakeStore::new(budget);
@@ -504,7 +518,10 @@ fn nothing_drawn_is_evicted_in_its_frame() {
     // 4,323 uploads and failed the check above. The bound is 5x the measured figure:
     // room for builder changes, while catching thrashing.
     let evictions = store.evictions.len();
-    eprintln!("evictions over the orbit: {evictions}, uploads {}", store.uploads.len());
+    eprintln!(
+        "evictions over the orbit: {evictions}, uploads {}",
+        store.uploads.len()
+    );
     assert!(evictions > 0, "the budget should force evictions");
     assert!(evictions < 1000, "{evictions} evictions: thrashing");
 }
@@ -568,7 +585,11 @@ fn every_source_reaches_the_same_cut() {
         d.sort_unstable();
         d
     };
-    assert!(complete.len() > 20, "cut too coarse for the test: {}", complete.len());
+    assert!(
+        complete.len() > 20,
+        "cut too coarse for the test: {}",
+        complete.len()
+    );
     assert_eq!(instant, complete);
     assert_eq!(chaos, complete);
     assert_eq!(threaded, complete);
@@ -600,7 +621,10 @@ fn every_source_reaches_the_same_cut() {
         let g = s.groups().of(victim);
         s.groups().members(g).to_vec()
     };
-    assert!(failed_cut.iter().all(|n| !g.contains(n)), "failed group drawn");
+    assert!(
+        failed_cut.iter().all(|n| !g.contains(n)),
+        "failed group drawn"
+    );
     assert!(cut_edges(&m, &failed_cut).is_closed_manifold());
 }
 

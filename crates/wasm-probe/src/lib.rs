@@ -25,7 +25,10 @@ impl PatchSource for SliceSource<'_> {
     }
     fn poll(&mut self, out: &mut Vec<Answer>) {
         for n in self.wanted.drain(..) {
-            out.push(Answer::from_result(n, self.index.read_patch(self.bytes, n as usize)));
+            out.push(Answer::from_result(
+                n,
+                self.index.read_patch(self.bytes, n as usize),
+            ));
         }
     }
     fn pending(&self) -> usize {
@@ -117,7 +120,7 @@ mod tests {
             triangles: 20_000,
             ..Default::default()
         };
-        tessera_gen::write_sphere(&ply, &opts).unwrap();
+        tessera_gen::write_sphere(&ply, &opts, &tessera_gen::NoProgress).unwrap();
         let build = tessera_build::BuildOptions {
             leaf_triangles: 400,
             node_triangles: 200,
@@ -127,6 +130,10 @@ mod tests {
         let bytes = std::fs::read(&tsr).unwrap();
         let r = super::run(&bytes, 30).expect("parses");
         assert!(r >> 32 > 6, "drew {} nodes", r >> 32);
-        assert_eq!(super::run(&bytes[..bytes.len() - 1], 30), None, "truncated model");
+        assert_eq!(
+            super::run(&bytes[..bytes.len() - 1], 30),
+            None,
+            "truncated model"
+        );
     }
 }

@@ -44,6 +44,7 @@ pub fn build_sphere(triangles: u64, seed: u64, colors: bool, opts: &BuildOptions
             colors,
             noise: 0.05,
         },
+        &tessera_gen::NoProgress,
     )
     .expect("generate sphere");
     build_file(dir, input, opts)
