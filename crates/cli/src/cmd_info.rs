@@ -4,7 +4,7 @@ use anyhow::Context;
 use serde_json::json;
 use std::path::PathBuf;
 use std::process::ExitCode;
-use tessera_format::{Grid, Model, ATTR_COLORS, ATTR_NORMALS, ATTR_UVS, NODE_FLAG_LEAF};
+use tessera_format::{Grid, ModelIndex, ATTR_COLORS, ATTR_NORMALS, ATTR_UVS, NODE_FLAG_LEAF};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -14,7 +14,7 @@ pub struct Args {
     json: bool,
 }
 
-pub fn info_json(m: &Model) -> serde_json::Value {
+pub fn info_json(m: &ModelIndex, file: &str) -> serde_json::Value {
     let h = m.header();
     let nodes = m.nodes();
     let mut per_level: Vec<(u64, u64, u64)> = vec![(0, 0, 0); h.level_count as usize];
@@ -48,7 +48,7 @@ pub fn info_json(m: &Model) -> serde_json::Value {
     let grid = Grid::of_header(h);
     let node_table = h.node_count * 128;
     json!({
-        "file": m.path().display().to_string(),
+        "file": file,
         "format_version": h.version,
         "file_bytes": h.file_bytes,
         "attributes": attrs,
@@ -73,8 +73,10 @@ pub fn info_json(m: &Model) -> serde_json::Value {
 }
 
 pub fn run(a: Args) -> anyhow::Result<ExitCode> {
-    let m = Model::open(&a.model).with_context(|| format!("{}", a.model.display()))?;
-    let j = info_json(&m);
+    let model =
+        crate::open::open_model(&a.model).with_context(|| format!("{}", a.model.display()))?;
+    let m = model.index();
+    let j = info_json(m, &a.model.display().to_string());
     if a.json {
         println!("{}", serde_json::to_string_pretty(&j)?);
         return Ok(ExitCode::SUCCESS);

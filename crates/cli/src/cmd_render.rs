@@ -3,12 +3,10 @@
 
 use std::path::PathBuf;
 use std::process::ExitCode;
-use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::{bail, Context};
 use serde_json::json;
-use tessera_format::Model;
 use tessera_render::{FrameStats, Mode, Viewer, ViewerOptions};
 use tessera_select::CameraPath;
 
@@ -17,7 +15,7 @@ use tessera_select::CameraPath;
     clap::ArgGroup::new("cameras").required(true).multiple(false).args(["path", "orbit"])
 ))]
 pub struct Args {
-    /// The model (.tsr).
+    /// The model: a .tsr file or an http:// URL of one (e.g. from `tessera serve`).
     model: PathBuf,
     /// Camera path (JSON keyframes, see docs/camera.md).
     #[arg(long, value_name = "PATH.json")]
@@ -72,12 +70,11 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     if a.orbit == Some(0) {
         bail!("--orbit needs at least one frame");
     }
-    let model = Arc::new(
-        Model::open(&a.model).with_context(|| format!("cannot open {}", a.model.display()))?,
-    );
+    let model = crate::open::open_model(&a.model)
+        .with_context(|| format!("cannot open {}", a.model.display()))?;
     let path = match (&a.path, a.orbit) {
         (Some(p), _) => CameraPath::from_file(p, a.width, a.height)?,
-        (None, Some(n)) => CameraPath::orbit(model.header().bounding_sphere, n, a.width, a.height),
+        (None, Some(n)) => CameraPath::orbit(model.index().header().bounding_sphere, n, a.width, a.height),
         (None, None) => bail!("give --path or --orbit"),
     };
     if let Some(dir) = &a.out {

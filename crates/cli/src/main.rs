@@ -10,6 +10,7 @@ mod cmd_info;
 mod cmd_render;
 mod cmd_serve;
 mod cmd_verify;
+mod open;
 mod progress;
 
 use clap::{Parser, Subcommand};

@@ -158,3 +158,67 @@ fn busy_port_and_nothing_to_serve_are_clear_errors() {
         "{e}"
     );
 }
+
+/// `info` and `render` on an `http://` URL from `tessera serve`: the same report (but
+/// the name) and byte-identical PNG frames as on the local file; a URL that serves no
+/// model is one clear error.
+#[test]
+fn info_and_render_read_remote_models() {
+    let built = common::build_sphere(20_000, 5, false, &common::small_options());
+    let mut child = Running(
+        tessera()
+            .arg("serve")
+            .arg(&built.model_path)
+            .args(["--addr", "127.0.0.1:0"])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    let mut out = BufReader::new(child.0.stdout.take().unwrap());
+    let mut line = String::new();
+    out.read_line(&mut line).unwrap();
+    let base = line
+        .trim()
+        .trim_start_matches("serving 1 model at ")
+        .trim_end_matches('/')
+        .to_string();
+    let name = built.model_path.file_name().unwrap().to_str().unwrap();
+    let url = format!("{base}/models/{name}");
+
+    let info = |target: &str| -> serde_json::Value {
+        let o = tessera().args(["info", target, "--json"]).output().unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let mut v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        v["file"] = serde_json::Value::Null;
+        v
+    };
+    assert_eq!(info(&url), info(built.model_path.to_str().unwrap()));
+
+    let dir = tempfile::tempdir().unwrap();
+    let render = |target: &str, out: &str| {
+        let o = tessera()
+            .args(["render", target, "--orbit", "2", "--complete"])
+            .args(["--width", "200", "--height", "150", "--out"])
+            .arg(dir.path().join(out))
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    };
+    render(built.model_path.to_str().unwrap(), "local");
+    render(&url, "remote");
+    for f in ["frame_00000.png", "frame_00001.png"] {
+        let a = std::fs::read(dir.path().join("local").join(f)).unwrap();
+        let b = std::fs::read(dir.path().join("remote").join(f)).unwrap();
+        assert!(a == b, "{f}: the remote render differs from the local one");
+    }
+
+    let o = tessera()
+        .args(["info", &format!("{base}/models/missing.tsr")])
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.starts_with("error: ") && err.contains("not found"), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+}
