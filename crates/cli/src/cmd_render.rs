@@ -74,7 +74,9 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         .with_context(|| format!("cannot open {}", a.model.display()))?;
     let path = match (&a.path, a.orbit) {
         (Some(p), _) => CameraPath::from_file(p, a.width, a.height)?,
-        (None, Some(n)) => CameraPath::orbit(model.index().header().bounding_sphere, n, a.width, a.height),
+        (None, Some(n)) => {
+            CameraPath::orbit(model.index().header().bounding_sphere, n, a.width, a.height)
+        }
         (None, None) => bail!("give --path or --orbit"),
     };
     if let Some(dir) = &a.out {

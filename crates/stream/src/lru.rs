@@ -171,7 +171,7 @@ impl<V> Lru<V> {
     /// Makes room for `bytes` by removing victims (see [`Lru::victim`]) until they fit,
     /// returning what was removed. If they still do not fit (everything left is recent
     /// or pinned) the caller decides: see [`Lru::admit`].
-    pub fn make_room(&mut self, bytes: u64, keep_since: u64) -> Vec<(u32, V)> {
+    fn make_room(&mut self, bytes: u64, keep_since: u64) -> Vec<(u32, V)> {
         let mut out = Vec::new();
         while self.would_exceed(bytes) {
             let Some(k) = self.victim(keep_since, |_| false) else {

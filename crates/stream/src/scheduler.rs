@@ -623,7 +623,6 @@ impl Scheduler {
                 wanted.push((n, pri.min(PREFETCH_PRIORITY_MAX)));
             }
         }
-        wanted.retain(|(n, _)| !self.failed.contains(n));
         source.request(&wanted);
         let hint: Vec<u32> = self
             .prefetch
