@@ -77,6 +77,12 @@ pub trait PatchReader: Send + Sync {
     fn index(&self) -> &ModelIndex;
     /// Reads, checks and decodes node `i`'s patch (blocking).
     fn decode_patch(&self, i: usize) -> Result<PatchData, FormatError>;
+    /// Reads, checks and decodes the patches of `nodes` (blocking); one result per node,
+    /// in the order given. Readers whose reads have a high fixed cost (HTTP) override it
+    /// to fetch patches adjacent in the file with one read. Default: one by one.
+    fn decode_patches(&self, nodes: &[usize]) -> Vec<Result<PatchData, FormatError>> {
+        nodes.iter().map(|&i| self.decode_patch(i)).collect()
+    }
     /// A hint that node `i`'s patch will be read soon (e.g. kernel read-ahead).
     /// Default: nothing.
     fn advise(&self, i: usize) {

@@ -167,11 +167,16 @@ fn remote_render_equals_local_pixel_for_pixel() {
             "camera {i}: remote frame differs from the local one"
         );
     }
+    let (requests, patches) = (remote.source().requests(), remote.patches_read());
     eprintln!(
-        "remote render: {} requests, {} bytes of a {}-byte file",
-        remote.source().requests(),
+        "remote render: {requests} requests for {patches} patches, {} bytes of a {}-byte file",
         remote.source().bytes_fetched(),
         local.header().file_bytes
+    );
+    // Coalescing: siblings are adjacent in the file and come with one request.
+    assert!(
+        requests * 2 <= patches,
+        "{requests} requests for {patches} patches: adjacent patches not coalesced"
     );
 }
 

@@ -8,8 +8,11 @@
 //!
 //! - a priority queue of wanted nodes, replaced wholesale by every [`Pager::request`]
 //!   (so stale wants from earlier frames are cancelled);
-//! - loader thread(s) that pop the highest-priority node, read + decode it with
-//!   [`PatchReader::decode_patch`] and publish the result;
+//! - loader thread(s) that pop the highest-priority node together with the queued
+//!   nodes beside it in the node table (their patches are beside it in the file:
+//!   coalescing, at most [`BATCH_MAX_PATCHES`] patches and [`BATCH_MAX_BYTES`]), read +
+//!   decode them with one [`PatchReader::decode_patches`] (one range request for a
+//!   remote model) and publish the results;
 //! - the list of answers drained by [`Pager::poll`].
 //!
 //! Which patches stay in RAM, and for how long, is the streaming core's decision
@@ -26,10 +29,15 @@
 //! wants "visible nodes first, then prefetch" gives visible nodes priorities above all
 //! prefetch priorities (e.g. `1e6 + screen_error` vs `screen_error`).
 //!
+//! Each loader thread has one read in flight; a remote source bounds its own requests
+//! in flight on top of that (`tessera-http`: 3).
+//!
 //! # Failures
-//! A patch that fails to read or decode (bad CRC, truncated file, bad node index) is
-//! answered once as [`Answer::Failed`] and remembered: later requests skip it, so it is
-//! never retried in a loop. The caller keeps drawing its parent.
+//! A patch that fails to decode (bad CRC, corrupt bytes, bad node index) is answered
+//! once as [`Answer::Failed`] and remembered: later requests skip it, so it is never
+//! retried in a loop. A read that fails (I/O or network error, after the source's own
+//! retries) is answered as [`Answer::Unavailable`] and not remembered: the scheduler
+//! asks for it again after a backoff. Either way the caller keeps drawing its parent.
 
 mod loader;
 
@@ -38,11 +46,15 @@ use std::thread::JoinHandle;
 use std::time::Duration;
 
 use rayon::prelude::*;
-use rustc_hash::FxHashSet;
 use tessera_format::PatchReader;
 use tessera_stream::{Answer, PatchSource};
 
-use crate::loader::{Queued, Shared, State};
+use crate::loader::{Shared, State};
+
+/// Most patches one loader read takes together (the top node and its neighbours).
+pub const BATCH_MAX_PATCHES: usize = 16;
+/// Most patch bytes one loader read takes together (the top node always).
+pub const BATCH_MAX_BYTES: u64 = 512 << 10;
 
 /// Pager configuration.
 #[derive(Clone, Debug)]
@@ -116,21 +128,16 @@ impl Pager {
     /// skipped, as are duplicates (the first occurrence wins). Never blocks on I/O.
     pub fn request(&self, wanted: &[(u32, f32)]) {
         let mut st = self.state();
-        st.queue.clear();
-        let mut seen = FxHashSet::default();
+        st.clear_queue();
         for &(node, priority) in wanted {
-            if !seen.insert(node)
+            if st.queued.contains_key(&node)
                 || st.in_flight.contains(&node)
                 || st.answered.contains(&node)
                 || st.failed.contains(&node)
             {
                 continue;
             }
-            st.queue.push(Queued {
-                priority,
-                seq: seen.len() as u64,
-                node,
-            });
+            st.push(node, priority);
         }
         let any = !st.queue.is_empty();
         drop(st);
@@ -165,7 +172,7 @@ impl Pager {
     pub fn stats(&self) -> PagerStats {
         let st = self.state();
         PagerStats {
-            queued: st.queue.len(),
+            queued: st.queued.len(),
             in_flight: st.in_flight.len(),
             ..st.stats
         }
@@ -177,12 +184,37 @@ impl Pager {
     }
 
     /// Reads and decodes `nodes` now on the calling thread and rayon's pool (offline
-    /// frames), in the order given.
+    /// frames); answers in the order given. The nodes are read in table (file) order,
+    /// [`BATCH_MAX_PATCHES`] per [`PatchReader::decode_patches`] call, so a remote model
+    /// coalesces the adjacent ones.
     pub fn read_blocking(&self, nodes: &[u32]) -> Vec<Answer> {
         let model = &self.shared.model;
-        nodes
-            .par_iter()
-            .map(|&node| Answer::from_result(node, model.decode_patch(node as usize)))
+        let mut order: Vec<usize> = (0..nodes.len()).collect();
+        order.sort_by_key(|&k| nodes[k]);
+        let read: Vec<(usize, Answer)> = order
+            .par_chunks(BATCH_MAX_PATCHES)
+            .flat_map_iter(|chunk| {
+                let ids: Vec<usize> = chunk.iter().map(|&k| nodes[k] as usize).collect();
+                let results = model.decode_patches(&ids);
+                chunk
+                    .iter()
+                    .zip(results)
+                    .map(|(&k, r)| (k, Answer::from_read(nodes[k], r)))
+                    .collect::<Vec<_>>()
+            })
+            .collect();
+        let mut out: Vec<Option<Answer>> = vec![None; nodes.len()];
+        for (k, a) in read {
+            out[k] = Some(a);
+        }
+        out.into_iter()
+            .zip(nodes)
+            .map(|(a, &node)| {
+                a.unwrap_or_else(|| Answer::Failed {
+                    node,
+                    error: "the reader gave no answer".into(),
+                })
+            })
             .collect()
     }
 }
@@ -211,7 +243,7 @@ impl Drop for Pager {
         {
             let mut st = self.state();
             st.shutdown = true;
-            st.queue.clear();
+            st.clear_queue();
         }
         self.shared.wake.notify_all();
         for h in self.threads.drain(..) {

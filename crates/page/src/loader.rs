@@ -9,11 +9,11 @@ use std::collections::BinaryHeap;
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
-use rustc_hash::FxHashSet;
-use tessera_format::PatchReader;
+use rustc_hash::{FxHashMap, FxHashSet};
+use tessera_format::{FormatError, PatchData, PatchReader};
 use tessera_stream::Answer;
 
-use crate::PagerStats;
+use crate::{PagerStats, BATCH_MAX_BYTES, BATCH_MAX_PATCHES};
 
 /// One queued request: larger priority first, then earlier in the request slice.
 #[derive(Debug)]
@@ -45,7 +45,11 @@ impl Ord for Queued {
 /// Everything behind the pager's mutex.
 #[derive(Default)]
 pub(crate) struct State {
+    /// Highest priority first; entries whose node is no longer in `queued` (taken into
+    /// a neighbour's batch) are skipped when popped.
     pub queue: BinaryHeap<Queued>,
+    /// The nodes of `queue` still waiting, with their priorities.
+    pub queued: FxHashMap<u32, f32>,
     pub in_flight: FxHashSet<u32>,
     /// Nodes of `done` (not polled yet): not queued again.
     pub answered: FxHashSet<u32>,
@@ -60,6 +64,79 @@ pub(crate) struct Shared {
     pub read_delay: Option<Duration>,
     pub state: Mutex<State>,
     pub wake: Condvar,
+}
+
+impl State {
+    /// Empties the queue.
+    pub fn clear_queue(&mut self) {
+        self.queue.clear();
+        self.queued.clear();
+    }
+
+    /// Queues `node` (not queued yet).
+    pub fn push(&mut self, node: u32, priority: f32) {
+        let seq = self.queued.len() as u64;
+        self.queued.insert(node, priority);
+        self.queue.push(Queued {
+            priority,
+            seq,
+            node,
+        });
+    }
+
+    /// Takes the highest-priority node and the queued nodes beside it in the table
+    /// (their patches are beside it in the file), at most [`BATCH_MAX_PATCHES`] patches
+    /// and [`BATCH_MAX_BYTES`] (the first node always); in flight from now on. Order:
+    /// the popped node, then its neighbours by priority.
+    fn take_batch(&mut self, model: &dyn PatchReader) -> Option<Vec<u32>> {
+        let first = loop {
+            let q = self.queue.pop()?;
+            if self.queued.remove(&q.node).is_some() {
+                break q.node;
+            }
+        };
+        let index = model.index();
+        let bytes = |n: u32| {
+            index
+                .patch_range(n as usize)
+                .map_or(u64::MAX, |r| r.end - r.start)
+        };
+        let mut total = bytes(first);
+        let mut near: Vec<(u32, f32)> = Vec::new();
+        // Alternately one step up and one down the table, while the next node is queued
+        // and fits: (last node taken, step, still growing).
+        let count = index.nodes().len() as i64;
+        let mut ends = [(i64::from(first), 1i64, true), (i64::from(first), -1, true)];
+        while ends.iter().any(|e| e.2) {
+            for e in ends.iter_mut().filter(|e| e.2) {
+                let n = e.0 + e.1;
+                e.2 = false;
+                if n < 0 || n >= count || near.len() + 1 >= BATCH_MAX_PATCHES {
+                    continue;
+                }
+                let n = n as u32;
+                let b = bytes(n);
+                if let Some(&p) = self.queued.get(&n) {
+                    if total.saturating_add(b) <= BATCH_MAX_BYTES {
+                        near.push((n, p));
+                        total += b;
+                        *e = (i64::from(n), e.1, true);
+                    }
+                }
+            }
+        }
+        near.sort_by(|a, b| b.1.total_cmp(&a.1));
+        let mut batch = Vec::with_capacity(near.len() + 1);
+        batch.push(first);
+        for (n, _) in near {
+            self.queued.remove(&n);
+            batch.push(n);
+        }
+        for &n in &batch {
+            self.in_flight.insert(n);
+        }
+        Some(batch)
+    }
 }
 
 impl Shared {
@@ -89,18 +166,19 @@ fn delay(shared: &Shared, delay: Duration) -> bool {
     }
 }
 
-/// A loader thread's body: pop, read + decode unlocked, publish; until shutdown.
+/// A loader thread's body: take a batch (the top node and its queued neighbours), read
+/// + decode it unlocked with one [`PatchReader::decode_patches`], publish; until
+/// shutdown.
 pub(crate) fn run(shared: &Shared) {
     loop {
-        let node = {
+        let batch = {
             let mut st = shared.lock();
             loop {
                 if st.shutdown {
                     return;
                 }
-                if let Some(q) = st.queue.pop() {
-                    st.in_flight.insert(q.node);
-                    break q.node;
+                if let Some(b) = st.take_batch(shared.model.as_ref()) {
+                    break b;
                 }
                 st = match shared.wake.wait(st) {
                     Ok(g) => g,
@@ -109,22 +187,53 @@ pub(crate) fn run(shared: &Shared) {
             }
         };
         if let Some(d) = shared.read_delay {
-            if !delay(shared, d) {
-                shared.lock().in_flight.remove(&node);
+            if !delay(shared, d * batch.len() as u32) {
+                let mut st = shared.lock();
+                for n in &batch {
+                    st.in_flight.remove(n);
+                }
                 return;
             }
         }
-        let result = shared.model.decode_patch(node as usize);
+        let nodes: Vec<usize> = batch.iter().map(|&n| n as usize).collect();
+        let results = shared.model.decode_patches(&nodes);
         let mut st = shared.lock();
-        st.in_flight.remove(&node);
-        st.answered.insert(node);
-        if let Err(e) = &result {
-            tracing::warn!(node, error = %e, "patch failed to load");
+        for (&node, result) in batch.iter().zip(results) {
+            publish(&mut st, node, result);
+        }
+        // A reader answering fewer results than asked: the rest fail, never hang.
+        let unanswered: Vec<u32> = batch
+            .iter()
+            .copied()
+            .filter(|n| st.in_flight.contains(n))
+            .collect();
+        for node in unanswered {
+            let e = FormatError::InvalidInput {
+                detail: "the reader gave no answer".into(),
+            };
+            publish(&mut st, node, Err(e));
+        }
+    }
+}
+
+/// Records one read's result as an answer: a failure that may pass (network, I/O) is
+/// answered [`Answer::Unavailable`] and may be asked for again; any other is answered
+/// [`Answer::Failed`] and remembered (never read again).
+fn publish(st: &mut State, node: u32, result: Result<PatchData, FormatError>) {
+    st.in_flight.remove(&node);
+    st.answered.insert(node);
+    let answer = Answer::from_read(node, result);
+    match &answer {
+        Answer::Loaded { .. } => st.stats.loads += 1,
+        Answer::Unavailable { error, .. } => {
+            tracing::debug!(node, %error, "patch unavailable for now");
+            st.stats.failures += 1;
+        }
+        Answer::Failed { error, .. } => {
+            tracing::warn!(node, %error, "patch failed to load");
             st.stats.failures += 1;
             st.failed.insert(node);
-        } else {
-            st.stats.loads += 1;
         }
-        st.done.push(Answer::from_result(node, result));
     }
+    st.done.push(answer);
 }

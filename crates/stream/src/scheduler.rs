@@ -23,7 +23,7 @@
 
 use std::sync::Arc;
 
-use rustc_hash::FxHashSet;
+use rustc_hash::{FxHashMap, FxHashSet};
 use serde::Serialize;
 use tessera_format::{ModelIndex, PatchData, NO_NODE};
 use tessera_select::{
@@ -49,6 +49,10 @@ const VISIBLE_PRIORITY: f32 = 1e6;
 const PREFETCH_PRIORITY_MAX: f32 = 1e5;
 /// Patches read per batch by a complete frame.
 const COMPLETE_BATCH: usize = 64;
+/// Backoff before an unavailable patch is asked for again (doubling per failed try)...
+pub const RETRY_FIRST_MS: f64 = 500.0;
+/// ... up to this.
+pub const RETRY_MAX_MS: f64 = 30_000.0;
 
 /// How frames are produced; see the module docs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
@@ -183,7 +187,13 @@ pub struct Scheduler {
     res: Residency,
     /// Decoded patches in RAM.
     ram: Lru<Arc<PatchData>>,
+    /// Nodes not asked for (failed, or unavailable until their retry time): their
+    /// groups never count, their parents are drawn.
     failed: FxHashSet<u32>,
+    /// Unavailable nodes (reads that failed): when to ask again (clock ms), tries.
+    retry: FxHashMap<u32, (f64, u32)>,
+    /// An unavailability was reported and nothing retried has loaded since.
+    outage: bool,
     sel: Selection,
     prefetch: Vec<(u32, f32)>,
     prev_camera: Option<(Camera, f64)>,
@@ -329,6 +339,8 @@ impl Scheduler {
             frame: 0,
             epoch: 0,
             failed: FxHashSet::default(),
+            retry: FxHashMap::default(),
+            outage: false,
             sel: Selection::default(),
             prefetch: Vec::new(),
             prev_camera: None,
@@ -385,7 +397,49 @@ impl Scheduler {
                     tracing::warn!(node, %error, "root patch skipped");
                     self.failed.insert(node);
                 }
+                Answer::Unavailable { node, error } => self.unavailable(node, &error),
             }
+        }
+    }
+
+    /// Remembers that `node` could not be read: its parent is drawn until its retry
+    /// time. Reported once per outage (until a retried patch loads), not per node.
+    fn unavailable(&mut self, node: u32, error: &str) {
+        self.failed.insert(node);
+        let now = (self.opts.clock)();
+        let tries = self.retry.get(&node).map_or(0, |r| r.1) + 1;
+        let wait = (RETRY_FIRST_MS * 2f64.powi(tries as i32 - 1)).min(RETRY_MAX_MS);
+        self.retry.insert(node, (now + wait, tries));
+        if !self.outage {
+            self.outage = true;
+            tracing::warn!(
+                node,
+                %error,
+                "patches unavailable: coarser nodes are shown; retrying with backoff"
+            );
+        } else {
+            tracing::debug!(node, %error, tries, "patch unavailable");
+        }
+    }
+
+    /// Unavailable nodes whose retry time has come are wanted again.
+    fn retry_due(&mut self) {
+        if self.retry.is_empty() {
+            return;
+        }
+        let now = (self.opts.clock)();
+        for (node, (at, _)) in &self.retry {
+            if *at <= now {
+                self.failed.remove(node);
+            }
+        }
+    }
+
+    /// A patch arrived: an unavailable one has recovered.
+    fn loaded(&mut self, node: u32) {
+        if self.retry.remove(&node).is_some() && self.outage {
+            self.outage = false;
+            tracing::info!(node, "patches available again");
         }
     }
 
@@ -416,6 +470,7 @@ impl Scheduler {
         for a in answers.drain(..) {
             match a {
                 Answer::Loaded { node, patch } => {
+                    self.loaded(node);
                     if (node as usize) < self.res.resident.len() {
                         let bytes = decoded_bytes(&patch);
                         let (admitted, _) = self.ram.admit(node, patch, bytes, self.frame);
@@ -433,9 +488,11 @@ impl Scheduler {
                         tracing::warn!(node, %error, "patch skipped, its parent is shown instead");
                     }
                 }
+                Answer::Unavailable { node, error } => self.unavailable(node, &error),
             }
         }
         self.answers = answers;
+        self.retry_due();
     }
 
     /// Selection over what the store holds (groups complete and reachable).
@@ -698,6 +755,7 @@ impl Scheduler {
         stats.cache_misses = todo.len();
         let mut drawn = vec![false; self.sel.draw.len()];
         let mut cleared = false;
+        let (mut unavailable, mut recovered) = (Vec::new(), Vec::new());
         let mut next = 0;
         loop {
             // Read and upload batches until everything is resident or the store is full.
@@ -710,6 +768,9 @@ impl Scheduler {
                 for (i, a) in answers.into_iter().enumerate() {
                     match a {
                         Answer::Loaded { node, patch } => {
+                            if self.retry.contains_key(&node) {
+                                recovered.push(node);
+                            }
                             let g = groups.of(node);
                             let root = self.nv.nodes()[node as usize].parent == NO_NODE;
                             let key = (node, g, root);
@@ -736,6 +797,10 @@ impl Scheduler {
                         Answer::Failed { node, error } => {
                             tracing::warn!(node, %error, "patch skipped");
                             self.failed.insert(node);
+                        }
+                        Answer::Unavailable { node, error } => {
+                            self.failed.insert(node);
+                            unavailable.push((node, error));
                         }
                     }
                 }
@@ -771,7 +836,14 @@ impl Scheduler {
             // the pass just handed over). Pinned roots stay.
             self.res.evict_unused(groups, store, frame + 1);
         }
-        if !full && self.sel.draw.iter().any(|n| self.failed.contains(n)) {
+        for node in recovered {
+            self.loaded(node);
+        }
+        for (node, error) in unavailable {
+            self.unavailable(node, &error);
+        }
+        let corrupt = |n: &u32| self.failed.contains(n) && !self.retry.contains_key(n);
+        if !full && self.sel.draw.iter().any(corrupt) {
             tracing::warn!("corrupt patches in the cut; the next frame shows their parents");
         }
         self.prev_camera = None;

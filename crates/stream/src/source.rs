@@ -5,11 +5,12 @@
 //! ([`PatchSource::poll`]); a source does its reading and decoding elsewhere (loader
 //! threads over a memory map in `tessera-page`, an HTTP fetcher, a web worker) and
 //! never makes a frame wait. Answers may come in any order, late, or not at all; a
-//! failed node is reported once and never asked for again.
+//! failed node is reported once and never asked for again; an unavailable one (a read
+//! that failed: network, I/O) is asked for again after a backoff.
 
 use std::sync::Arc;
 
-use tessera_format::PatchData;
+use tessera_format::{FormatError, PatchData};
 
 /// One finished request.
 #[derive(Clone, Debug)]
@@ -19,6 +20,10 @@ pub enum Answer {
     /// The node's patch cannot be had (bad checksum, truncated file, network error
     /// that the source gave up on); its parent is drawn instead.
     Failed { node: u32, error: String },
+    /// The node's patch could not be read this time (a network or I/O error the source
+    /// gave up on): its parent is drawn instead, and the scheduler asks for it again
+    /// after a backoff (the server may come back).
+    Unavailable { node: u32, error: String },
 }
 
 impl Answer {
@@ -36,10 +41,24 @@ impl Answer {
         }
     }
 
+    /// The answer for `node` from a read-and-decode result, telling failures that may
+    /// pass (I/O: [`Answer::Unavailable`]) from bad data ([`Answer::Failed`]).
+    pub fn from_read(node: u32, r: Result<PatchData, FormatError>) -> Answer {
+        match r {
+            Err(e @ FormatError::Io { .. }) => Answer::Unavailable {
+                node,
+                error: e.to_string(),
+            },
+            r => Answer::from_result(node, r),
+        }
+    }
+
     /// The node answered.
     pub fn node(&self) -> u32 {
         match self {
-            Answer::Loaded { node, .. } | Answer::Failed { node, .. } => *node,
+            Answer::Loaded { node, .. }
+            | Answer::Failed { node, .. }
+            | Answer::Unavailable { node, .. } => *node,
         }
     }
 }
