@@ -8,12 +8,16 @@
 //! (`tessera_select::write_cut_ply`). The edge report of the written mesh (boundary and
 //! non-manifold edges) is printed: on a closed input any cut must be a closed manifold, so
 //! this doubles as the crack check.
+//!
+//! MODEL is a path or an `http://` URL (`crate::open`): a remote model fetches only the
+//! patches of the cut, adjacent ones coalesced into one range request, and the output is
+//! byte for byte the local one's.
 
 use anyhow::{bail, Context};
 use serde_json::json;
 use std::path::PathBuf;
 use std::process::ExitCode;
-use tessera_format::{Grid, Model};
+use tessera_format::{Grid, PatchReader};
 use tessera_select::{
     extract_nodes, select_cut, uniform_level_cut, write_cut_ply, Camera, Criterion,
 };
@@ -26,7 +30,7 @@ use tessera_select::{
         .args(["max_error", "camera", "level"])
 ))]
 pub struct Args {
-    /// The model (.tsr).
+    /// The model: a .tsr path or an http:// URL of one.
     model: PathBuf,
     /// View-independent cut: the coarsest nodes whose saturated error is at most E
     /// (model units). 0 selects the leaves, i.e. the full-resolution input.
@@ -56,26 +60,27 @@ pub struct Args {
 }
 
 /// Chooses the node indices of a cut. `level` is checked against the model.
-fn select(m: &Model, a: &Args) -> anyhow::Result<(Vec<u32>, serde_json::Value)> {
-    let h = m.header();
+fn select(m: &dyn PatchReader, a: &Args) -> anyhow::Result<(Vec<u32>, serde_json::Value)> {
+    let h = m.index().header();
+    let nodes = m.index().nodes();
     if let Some(e) = a.max_error {
         if !(e.is_finite() && e >= 0.0) {
             bail!("--max-error must be a finite number >= 0, got {e}");
         }
-        let cut = select_cut(h, m.nodes(), &Criterion::MaxError { max_error: e });
+        let cut = select_cut(h, nodes, &Criterion::MaxError { max_error: e });
         return Ok((cut.nodes, json!({ "max_error": e })));
     }
     if let Some(level) = a.level {
         if level >= h.level_count {
             bail!(
                 "{}: --level {level} is out of range: the model has {} levels (0..={})",
-                m.path().display(),
+                a.model.display(),
                 h.level_count,
                 h.level_count.saturating_sub(1)
             );
         }
         return Ok((
-            uniform_level_cut(m.nodes(), level as u8),
+            uniform_level_cut(nodes, level as u8),
             json!({ "level": level }),
         ));
     }
@@ -90,7 +95,7 @@ fn select(m: &Model, a: &Args) -> anyhow::Result<(Vec<u32>, serde_json::Value)> 
     let cull = !a.no_cull;
     let cut = select_cut(
         h,
-        m.nodes(),
+        nodes,
         &Criterion::View {
             camera,
             tolerance_px: tolerance,
@@ -103,20 +108,35 @@ fn select(m: &Model, a: &Args) -> anyhow::Result<(Vec<u32>, serde_json::Value)> 
     ))
 }
 
+/// The last segment of a model path or URL (`m.tsr` of `/data/m.tsr` and of
+/// `http://host/models/m.tsr`).
+fn model_name(model: &std::path::Path) -> String {
+    let s = model.to_string_lossy();
+    let s = s.split(['?', '#']).next().unwrap_or_default();
+    s.rsplit(['/', '\\']).next().unwrap_or_default().to_string()
+}
+
 pub fn run(a: Args) -> anyhow::Result<ExitCode> {
-    let m = Model::open(&a.model).with_context(|| format!("{}", a.model.display()))?;
-    let (nodes, criterion) = select(&m, &a)?;
+    let m = crate::open::open_model(&a.model).with_context(|| format!("{}", a.model.display()))?;
+    let m = m.as_ref();
+    let (nodes, criterion) = select(m, &a)?;
     // The format error names the node ("patch checksum mismatch for node 12 ...").
-    let x = extract_nodes(&m, &nodes).with_context(|| format!("{}", m.path().display()))?;
+    let x = extract_nodes(m, &nodes).with_context(|| format!("{}", a.model.display()))?;
     let comments = vec![
-        format!("tessera extract of {}", a.model.display()),
+        // The file name only: local and remote extracts of one model are the same bytes.
+        format!("tessera extract of {}", model_name(&a.model)),
         format!("cut {criterion}, {} nodes", x.nodes.len()),
     ];
-    write_cut_ply(&Grid::of_header(m.header()), &x.mesh, &a.output, comments)
-        .with_context(|| format!("writing {}", a.output.display()))?;
+    write_cut_ply(
+        &Grid::of_header(m.index().header()),
+        &x.mesh,
+        &a.output,
+        comments,
+    )
+    .with_context(|| format!("writing {}", a.output.display()))?;
 
-    let max_node_error = x.max_node_error(&m);
-    let levels = x.level_range(&m);
+    let max_node_error = x.max_node_error(m);
+    let levels = x.level_range(m);
     let e = &x.edges;
     if a.json {
         let j = json!({

@@ -1,4 +1,4 @@
-//! Opening the MODEL argument of `info` and `render`: a local path (memory-mapped) or an
+//! Opening the MODEL argument of `info`, `render` and `extract`: a local path (memory-mapped) or an
 //! `http://` URL (range requests through `tessera-http`).
 
 use std::path::Path;

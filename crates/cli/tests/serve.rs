@@ -214,3 +214,69 @@ fn info_and_render_read_remote_models() {
     assert!(err.contains("not found"), "{err}");
     assert_eq!(String::from_utf8_lossy(&o.stderr).trim().lines().count(), 1);
 }
+
+/// `extract` on an `http://` URL from `tessera serve` writes the same PLY, byte for byte,
+/// as on the local file (full resolution, a uniform level, a coarse error cut); a bad
+/// level is the same clear error either way.
+#[test]
+fn extract_reads_remote_models() {
+    let built = common::build_sphere(20_000, 6, true, &common::small_options());
+    let (_child, addr) = start_serve(&built.model_path);
+    let name = built.model_path.file_name().unwrap().to_str().unwrap();
+    let url = format!("http://{addr}/models/{name}");
+    let local = built.model_path.to_str().unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let extract = |target: &str, cut: &[&str], out: &str| -> Vec<u8> {
+        let path = dir.path().join(out);
+        let o = tessera()
+            .args(["extract", target])
+            .args(cut)
+            .arg("-o")
+            .arg(&path)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        std::fs::read(&path).unwrap()
+    };
+    let cuts: [&[&str]; 3] = [
+        &["--max-error", "0"],
+        &["--level", "1"],
+        &["--max-error", "0.05"],
+    ];
+    for (i, cut) in cuts.iter().enumerate() {
+        let a = extract(local, cut, &format!("local{i}.ply"));
+        let b = extract(&url, cut, &format!("remote{i}.ply"));
+        assert!(a.len() > 1_000, "{cut:?}: {} bytes", a.len());
+        assert!(
+            a == b,
+            "{cut:?}: the remote extract differs from the local one"
+        );
+    }
+    let bad = |target: &str| {
+        let o = tessera()
+            .args(["extract", target, "--level", "99", "-o"])
+            .arg(dir.path().join("bad.ply"))
+            .output()
+            .unwrap();
+        error_line(&o)
+    };
+    let (el, er) = (bad(local), bad(&url));
+    assert!(
+        el.contains("out of range") && er.contains("out of range"),
+        "{el} / {er}"
+    );
+    assert!(er.contains(&url), "{er}");
+    let o = tessera()
+        .args([
+            "extract",
+            &format!("http://{addr}/models/missing.tsr"),
+            "--level",
+            "0",
+            "-o",
+        ])
+        .arg(dir.path().join("missing.ply"))
+        .output()
+        .unwrap();
+    let err = error_line(&o);
+    assert!(err.contains("not found"), "{err}");
+}

@@ -10,7 +10,7 @@
 
 use rayon::prelude::*;
 use std::path::Path;
-use tessera_format::{FormatError, Grid, Model, NodeRecord, PatchData};
+use tessera_format::{FormatError, Grid, NodeRecord, PatchData, PatchReader};
 use tessera_mesh::{Attributes, MeshError, PlyWriter, PlyWriterOptions, Vertex};
 
 use crate::{edge_report, merge_patches, CutMesh, EdgeReport, PatchRef};
@@ -27,31 +27,45 @@ pub struct Extracted {
 
 impl Extracted {
     /// The largest saturated error of the selected nodes (0 for an empty cut).
-    pub fn max_node_error(&self, m: &Model) -> f32 {
+    pub fn max_node_error<M: PatchReader + ?Sized>(&self, m: &M) -> f32 {
         self.records(m).map(|n| n.error).fold(0.0f32, f32::max)
     }
 
     /// The shallowest and deepest level of the selected nodes; `None` for an empty cut.
-    pub fn level_range(&self, m: &Model) -> Option<(u8, u8)> {
+    pub fn level_range<M: PatchReader + ?Sized>(&self, m: &M) -> Option<(u8, u8)> {
         self.records(m).map(|n| n.level).fold(None, |r, l| {
             Some(r.map_or((l, l), |(lo, hi): (u8, u8)| (lo.min(l), hi.max(l))))
         })
     }
 
     /// The node records of the selection (indices outside `m`'s table are skipped).
-    fn records<'m>(&'m self, m: &'m Model) -> impl Iterator<Item = &'m NodeRecord> + 'm {
-        let all = m.nodes();
+    fn records<'m, M: PatchReader + ?Sized>(
+        &'m self,
+        m: &'m M,
+    ) -> impl Iterator<Item = &'m NodeRecord> + 'm {
+        let all = m.index().nodes();
         self.nodes.iter().filter_map(move |&i| all.get(i as usize))
     }
 }
 
-/// Decodes the patches of `nodes` (node indices of `m`, in parallel) and merges them into
-/// one mesh. A patch that fails its checksum or does not decode fails the whole
-/// extraction; the error names the node. An index outside the node table is an error too.
-pub fn extract_nodes(m: &Model, nodes: &[u32]) -> Result<Extracted, FormatError> {
+/// Patches read per [`PatchReader::decode_patches`] call (a remote model fetches the
+/// adjacent ones of each call together).
+const READ_CHUNK: usize = 16;
+
+/// Decodes the patches of `nodes` (node indices of `m`, a local or remote model; in
+/// parallel, [`READ_CHUNK`] per read) and merges them into one mesh in the order given.
+/// A patch that fails its checksum or does not decode fails the whole extraction; the
+/// error names the node. An index outside the node table is an error too.
+pub fn extract_nodes<M: PatchReader + ?Sized>(
+    m: &M,
+    nodes: &[u32],
+) -> Result<Extracted, FormatError> {
     let patches: Vec<PatchData> = nodes
-        .par_iter()
-        .map(|&i| m.decode_patch(i as usize))
+        .par_chunks(READ_CHUNK)
+        .flat_map_iter(|chunk| {
+            let ids: Vec<usize> = chunk.iter().map(|&i| i as usize).collect();
+            m.decode_patches(&ids)
+        })
         .collect::<Result<_, _>>()?;
     let mesh = merge_patches(patches.iter().map(|p| PatchRef {
         positions: &p.positions,
