@@ -42,8 +42,10 @@ fn main() {
     assert!(addr.ip().is_loopback(), "loopback only");
     let bytes = std::fs::read(&file).expect("reading FILE");
     let len = bytes.len() as u64;
-    let deadline = Instant::now() + Duration::from_secs(seconds);
-    let t0 = Instant::now();
+    // Every client opens its keep-alive connection with a first request, then all start
+    // together: `clients` connections are open at once for the whole run.
+    let ready = std::sync::Barrier::new(clients as usize);
+    let t0 = std::sync::OnceLock::<Instant>::new();
 
     struct Out {
         lat_us: Vec<u32>,
@@ -54,70 +56,88 @@ fn main() {
     let outs: Vec<Out> = std::thread::scope(|sc| {
         let handles: Vec<_> = (0..clients)
             .map(|c| {
-                let (url, bytes) = (&url, &bytes);
-                sc.spawn(move || {
-                    let agent = ureq::Agent::new_with_config(
-                        ureq::Agent::config_builder()
-                            .http_status_as_error(false)
-                            .timeout_global(Some(Duration::from_secs(30)))
-                            .build(),
-                    );
-                    let mut rng = c.wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1;
-                    let mut next = move || {
-                        rng ^= rng << 13;
-                        rng ^= rng >> 7;
-                        rng ^= rng << 17;
-                        rng
-                    };
-                    let mut out = Out {
-                        lat_us: Vec::new(),
-                        errors: Vec::new(),
-                        body_bytes: 0,
-                        hostile: 0,
-                    };
-                    while Instant::now() < deadline {
-                        if hostile > 0 && next() % 100 < hostile {
-                            out.hostile += 1;
-                            if let Err(e) = hostile_request(addr, next()) {
-                                out.errors.push(e);
+                let (url, bytes, ready, t0) = (&url, &bytes, &ready, &t0);
+                std::thread::Builder::new()
+                    .stack_size(256 << 10)
+                    .spawn_scoped(sc, move || {
+                        let agent = ureq::Agent::new_with_config(
+                            ureq::Agent::config_builder()
+                                .http_status_as_error(false)
+                                .timeout_global(Some(Duration::from_secs(30)))
+                                .build(),
+                        );
+                        let mut rng = c.wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1;
+                        let mut next = move || {
+                            rng ^= rng << 13;
+                            rng ^= rng >> 7;
+                            rng ^= rng << 17;
+                            rng
+                        };
+                        let mut out = Out {
+                            lat_us: Vec::new(),
+                            errors: Vec::new(),
+                            body_bytes: 0,
+                            hostile: 0,
+                        };
+                        let valid = |out: &mut Out, a: u64, b: u64| {
+                            let t = Instant::now();
+                            let r = agent
+                                .get(url.as_str())
+                                .header("Range", format!("bytes={a}-{b}"))
+                                .call();
+                            let r = r.map_err(|e| e.to_string()).and_then(|mut r| {
+                                let status = r.status().as_u16();
+                                let body = r
+                                    .body_mut()
+                                    .with_config()
+                                    .limit(1 << 30)
+                                    .read_to_vec()
+                                    .map_err(|e| e.to_string())?;
+                                Ok((status, body))
+                            });
+                            out.lat_us
+                                .push(t.elapsed().as_micros().min(u32::MAX as u128) as u32);
+                            match r {
+                                Ok((206, body)) if body[..] == bytes[a as usize..=b as usize] => {
+                                    out.body_bytes += body.len() as u64
+                                }
+                                Ok((206, _)) => {
+                                    out.errors.push(format!("bytes {a}-{b}: wrong body"))
+                                }
+                                Ok((s, _)) => out.errors.push(format!("bytes {a}-{b}: status {s}")),
+                                Err(e) => out.errors.push(format!("bytes {a}-{b}: {e}")),
                             }
-                            continue;
+                        };
+                        valid(&mut out, 0, 0);
+                        if ready.wait().is_leader() {
+                            t0.get_or_init(Instant::now);
                         }
-                        let a = next() % len;
-                        let b = a + next() % (len - a).min(256 << 10);
-                        let t = Instant::now();
-                        let r = agent
-                            .get(url.as_str())
-                            .header("Range", format!("bytes={a}-{b}"))
-                            .call();
-                        let r = r.map_err(|e| e.to_string()).and_then(|mut r| {
-                            let status = r.status().as_u16();
-                            let body = r
-                                .body_mut()
-                                .with_config()
-                                .limit(1 << 30)
-                                .read_to_vec()
-                                .map_err(|e| e.to_string())?;
-                            Ok((status, body))
-                        });
-                        out.lat_us
-                            .push(t.elapsed().as_micros().min(u32::MAX as u128) as u32);
-                        match r {
-                            Ok((206, body)) if body[..] == bytes[a as usize..=b as usize] => {
-                                out.body_bytes += body.len() as u64
+                        ready.wait();
+                        let deadline = t0.get().copied().unwrap_or_else(Instant::now)
+                            + Duration::from_secs(seconds);
+                        while Instant::now() < deadline {
+                            if hostile > 0 && next() % 100 < hostile {
+                                out.hostile += 1;
+                                if let Err(e) = hostile_request(addr, next()) {
+                                    out.errors.push(e);
+                                }
+                                continue;
                             }
-                            Ok((206, _)) => out.errors.push(format!("bytes {a}-{b}: wrong body")),
-                            Ok((s, _)) => out.errors.push(format!("bytes {a}-{b}: status {s}")),
-                            Err(e) => out.errors.push(format!("bytes {a}-{b}: {e}")),
+                            let a = next() % len;
+                            let b = a + next() % (len - a).min(256 << 10);
+                            valid(&mut out, a, b);
                         }
-                    }
-                    out
-                })
+                        out
+                    })
+                    .expect("spawning a client thread")
             })
             .collect();
         handles.into_iter().map(|h| h.join().unwrap()).collect()
     });
-    let wall = t0.elapsed().as_secs_f64();
+    let wall = t0
+        .get()
+        .map_or(0.0, |t| t.elapsed().as_secs_f64())
+        .max(1e-3);
     let mut lat: Vec<u32> = outs.iter().flat_map(|o| o.lat_us.iter().copied()).collect();
     lat.sort_unstable();
     let errors: Vec<&String> = outs.iter().flat_map(|o| o.errors.iter()).collect();
