@@ -159,6 +159,11 @@ impl HttpSource {
         self.bytes_fetched.load(Ordering::Relaxed)
     }
 
+    /// Whether `range` lies in the prefix the first request fetched (read for free).
+    fn in_prefix(&self, range: &Range<u64>) -> bool {
+        range.end <= self.prefix.len() as u64
+    }
+
     /// Range requests sent so far (retries included).
     pub fn requests(&self) -> u64 {
         self.requests.load(Ordering::Relaxed)
@@ -297,7 +302,7 @@ impl ByteSource for HttpSource {
                 actual_bytes: self.len,
             });
         }
-        if range.end <= self.prefix.len() as u64 {
+        if self.in_prefix(&range) {
             return Ok(Cow::Borrowed(
                 &self.prefix[range.start as usize..range.end as usize],
             ));
@@ -343,7 +348,8 @@ impl RemoteModel {
         &self.source
     }
 
-    /// Patches whose bytes were received so far (each read counts).
+    /// Patches fetched with range requests so far (each read counts; patches inside
+    /// the first request's prefix are read for free and not counted).
     pub fn patches_read(&self) -> u64 {
         self.patches_read.load(Ordering::Relaxed)
     }
@@ -354,8 +360,11 @@ impl PatchReader for RemoteModel {
         &self.index
     }
     fn decode_patch(&self, i: usize) -> Result<PatchData, FormatError> {
-        let bytes = self.source.read(self.index.patch_range(i)?)?;
-        self.patches_read.fetch_add(1, Ordering::Relaxed);
+        let range = self.index.patch_range(i)?;
+        if !self.source.in_prefix(&range) {
+            self.patches_read.fetch_add(1, Ordering::Relaxed);
+        }
+        let bytes = self.source.read(range)?;
         self.index.decode_patch(i, &bytes)
     }
 
@@ -390,8 +399,10 @@ impl PatchReader for RemoteModel {
             let run = &ranges[start..end];
             match self.source.read(span_start..span_end) {
                 Ok(bytes) => {
-                    self.patches_read
-                        .fetch_add(run.len() as u64, Ordering::Relaxed);
+                    if !self.source.in_prefix(&(span_start..span_end)) {
+                        self.patches_read
+                            .fetch_add(run.len() as u64, Ordering::Relaxed);
+                    }
                     for (r, k) in run {
                         let b =
                             &bytes[(r.start - span_start) as usize..(r.end - span_start) as usize];

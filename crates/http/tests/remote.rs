@@ -2,83 +2,18 @@
 //! that misbehave: the index and every patch equal the local file's, a remote render
 //! equals the local one pixel for pixel, and faults give clear errors, never panics.
 
+mod common;
+
 use std::io::{Read, Write};
 use std::net::{SocketAddr, TcpListener};
-use std::path::{Path, PathBuf};
 use std::sync::Arc;
+
+use common::{build, Served};
 
 use tessera_format::{Model, PatchReader, HEADER_BYTES};
 use tessera_http::{RemoteModel, PREFIX_BYTES};
 use tessera_render::{Mode, Viewer, ViewerOptions};
 use tessera_select::{Camera, Orbit};
-use tessera_serve::{ServeOptions, Server};
-
-/// Builds a sphere model of `triangles` into `dir/name`.
-fn build(dir: &Path, name: &str, triangles: u64, seed: u64) -> PathBuf {
-    let ply = dir.join(format!("{name}.ply"));
-    let tsr = dir.join(name);
-    let opts = tessera_gen::SphereOptions {
-        triangles,
-        seed,
-        ..Default::default()
-    };
-    tessera_gen::write_sphere(&ply, &opts, &tessera_gen::NoProgress).unwrap();
-    let b = tessera_build::BuildOptions {
-        leaf_triangles: 400,
-        node_triangles: 200,
-        threads: Some(2),
-        ..Default::default()
-    };
-    tessera_build::build(&ply, &tsr, &b, &tessera_build::NoProgress).unwrap();
-    std::fs::remove_file(&ply).unwrap();
-    tsr
-}
-
-/// A running `tessera serve`; stops when dropped.
-struct Served {
-    addr: SocketAddr,
-    stop: Option<tokio::sync::oneshot::Sender<()>>,
-    thread: Option<std::thread::JoinHandle<()>>,
-}
-
-impl Served {
-    fn start(inputs: &[PathBuf]) -> Served {
-        let rt = tokio::runtime::Runtime::new().unwrap();
-        let opts = ServeOptions {
-            addr: "127.0.0.1:0".parse().unwrap(),
-            ..Default::default()
-        };
-        let server = rt.block_on(Server::bind(inputs, opts)).unwrap();
-        let addr = server.local_addr();
-        let (tx, rx) = tokio::sync::oneshot::channel::<()>();
-        let thread = std::thread::spawn(move || {
-            rt.block_on(server.run(async {
-                let _ = rx.await;
-            }))
-            .unwrap();
-        });
-        Served {
-            addr,
-            stop: Some(tx),
-            thread: Some(thread),
-        }
-    }
-
-    fn url(&self, name: &str) -> String {
-        format!("http://{}/models/{name}", self.addr)
-    }
-}
-
-impl Drop for Served {
-    fn drop(&mut self) {
-        if let Some(tx) = self.stop.take() {
-            let _ = tx.send(());
-        }
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
-        }
-    }
-}
 
 fn cameras(m: &Model) -> Vec<Camera> {
     let b = m.header().bounding_sphere;

@@ -53,6 +53,8 @@ const COMPLETE_BATCH: usize = 64;
 pub const RETRY_FIRST_MS: f64 = 500.0;
 /// ... up to this.
 pub const RETRY_MAX_MS: f64 = 30_000.0;
+/// Unavailable patches are reported (one warning) at most this often.
+pub const REPORT_EVERY_MS: f64 = 60_000.0;
 
 /// How frames are produced; see the module docs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
@@ -194,6 +196,10 @@ pub struct Scheduler {
     retry: FxHashMap<u32, (f64, u32)>,
     /// An unavailability was reported and nothing retried has loaded since.
     outage: bool,
+    /// When unavailable patches were last reported (clock ms), and how many have been
+    /// unavailable since.
+    reported: Option<f64>,
+    unreported: u64,
     sel: Selection,
     prefetch: Vec<(u32, f32)>,
     prev_camera: Option<(Camera, f64)>,
@@ -341,6 +347,8 @@ impl Scheduler {
             failed: FxHashSet::default(),
             retry: FxHashMap::default(),
             outage: false,
+            reported: None,
+            unreported: 0,
             sel: Selection::default(),
             prefetch: Vec::new(),
             prev_camera: None,
@@ -403,20 +411,25 @@ impl Scheduler {
     }
 
     /// Remembers that `node` could not be read: its parent is drawn until its retry
-    /// time. Reported once per outage (until a retried patch loads), not per node.
+    /// time. Reported with one warning, then at most every [`REPORT_EVERY_MS`] while
+    /// reads keep failing: never per node or per frame.
     fn unavailable(&mut self, node: u32, error: &str) {
         self.failed.insert(node);
+        self.outage = true;
         let now = (self.opts.clock)();
         let tries = self.retry.get(&node).map_or(0, |r| r.1) + 1;
         let wait = (RETRY_FIRST_MS * 2f64.powi(tries as i32 - 1)).min(RETRY_MAX_MS);
         self.retry.insert(node, (now + wait, tries));
-        if !self.outage {
-            self.outage = true;
+        self.unreported += 1;
+        if self.reported.is_none_or(|t| now - t >= REPORT_EVERY_MS) {
             tracing::warn!(
                 node,
                 %error,
+                failed_reads = self.unreported,
                 "patches unavailable: coarser nodes are shown; retrying with backoff"
             );
+            self.reported = Some(now);
+            self.unreported = 0;
         } else {
             tracing::debug!(node, %error, tries, "patch unavailable");
         }
