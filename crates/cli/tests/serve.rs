@@ -2,6 +2,7 @@
 //! a real socket, Ctrl-C, and the clear errors (busy port, nothing to serve).
 
 mod common;
+mod remote;
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::{SocketAddr, TcpStream};
@@ -179,32 +180,9 @@ fn info_and_render_read_remote_models() {
     let name = built.model_path.file_name().unwrap().to_str().unwrap();
     let url = format!("{base}/models/{name}");
 
-    let info = |target: &str| -> serde_json::Value {
-        let o = tessera().args(["info", target, "--json"]).output().unwrap();
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        let mut v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-        v["file"] = serde_json::Value::Null;
-        v
-    };
-    assert_eq!(info(&url), info(built.model_path.to_str().unwrap()));
-
-    let dir = tempfile::tempdir().unwrap();
-    let render = |target: &str, out: &str| {
-        let o = tessera()
-            .args(["render", target, "--orbit", "2", "--complete"])
-            .args(["--width", "200", "--height", "150", "--out"])
-            .arg(dir.path().join(out))
-            .output()
-            .unwrap();
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    };
-    render(built.model_path.to_str().unwrap(), "local");
-    render(&url, "remote");
-    for f in ["frame_00000.png", "frame_00001.png"] {
-        let a = std::fs::read(dir.path().join("local").join(f)).unwrap();
-        let b = std::fs::read(dir.path().join("remote").join(f)).unwrap();
-        assert!(a == b, "{f}: the remote render differs from the local one");
-    }
+    let local = built.model_path.to_str().unwrap();
+    assert_eq!(remote::info_json(&url), remote::info_json(local));
+    remote::assert_same_renders(local, &url);
 
     let o = tessera()
         .args(["info", &format!("{base}/models/missing.tsr")])
