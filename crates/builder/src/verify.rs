@@ -68,7 +68,7 @@ pub fn verify_model(m: &Model) -> VerifyReport {
 mod tests {
     use super::*;
     use crate::{build, BuildOptions, NoProgress};
-    use tessera_format::{header_crc32, Header, NodeRecord};
+    use tessera_format::NodeRecord;
 
     /// A small model built from a generated sphere.
     fn built(dir: &std::path::Path) -> std::path::PathBuf {
@@ -95,7 +95,7 @@ mod tests {
     #[test]
     fn fresh_build_is_valid_and_a_wrong_diamond_id_is_found() {
         // Why: the structural checks cannot see a diamond id shared by tetrahedra with
-        // different refinement edges (the node table's checksum is recomputed here, as a
+        // different refinement edges (the index is re-encoded with valid checksums here, as a
         // buggy writer would), only the tetra geometry can.
         let dir = tempfile::tempdir().unwrap();
         let path = built(dir.path());
@@ -110,16 +110,9 @@ mod tests {
         let b = (1..nodes.len())
             .find(|&b| key(&nodes[b]) != key(&nodes[a]))
             .unwrap();
-        let mut bytes = std::fs::read(&path).unwrap();
-        let hsize = std::mem::size_of::<Header>();
-        let mut h: Header = bytemuck::pod_read_unaligned(&bytes[..hsize]);
-        let table_end = hsize + nodes.len() * std::mem::size_of::<NodeRecord>();
-        let mut table: Vec<NodeRecord> = bytemuck::pod_collect_to_vec(&bytes[hsize..table_end]);
+        let mut table = nodes.to_vec();
         table[b].diamond = table[a].diamond;
-        h.node_table_crc32 = crc32fast::hash(bytemuck::cast_slice(&table));
-        h.header_crc32 = header_crc32(&h);
-        bytes[..hsize].copy_from_slice(bytemuck::bytes_of(&h));
-        bytes[hsize..table_end].copy_from_slice(bytemuck::cast_slice(&table));
+        let bytes = tessera_format::replace_index(&std::fs::read(&path).unwrap(), &table).unwrap();
         drop(m);
         let bad = dir.path().join("bad.tsr");
         std::fs::write(&bad, bytes).unwrap();

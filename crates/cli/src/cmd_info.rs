@@ -46,7 +46,7 @@ pub fn info_json(m: &ModelIndex, file: &str) -> serde_json::Value {
         attrs.push("uvs");
     }
     let grid = Grid::of_header(h);
-    let node_table = h.node_count * 128;
+    let ix = m.index_stats();
     json!({
         "file": file,
         "format_version": h.version,
@@ -65,7 +65,14 @@ pub fn info_json(m: &ModelIndex, file: &str) -> serde_json::Value {
         "quantization": { "bits": h.quant_bits, "step": grid.step(), "max_error": grid.max_error() },
         "cube": { "origin": h.cube_origin, "size": h.cube_size },
         "bounding_sphere": { "center": &h.bounding_sphere[..3], "radius": h.bounding_sphere[3] },
-        "bytes": { "header": 256, "node_table": node_table, "patches": h.patch_data_bytes },
+        "bytes": { "header": 256, "index": ix.index_bytes - 256, "patches": h.patch_data_bytes },
+        "index": {
+            "bytes": ix.index_bytes,
+            "bytes_per_node": ix.bytes_per_node(h.node_count),
+            "pages": ix.page_count,
+            "page_nodes": ix.page_nodes,
+            "first_frame_bytes": ix.first_frame_bytes,
+        },
         "bytes_per_input_triangle": h.file_bytes as f64 / h.input_triangles.max(1) as f64,
         "builder": { "leaf_triangles_max": h.leaf_triangles_max, "node_triangles_target": h.node_triangles_target },
         "per_level": per_level.iter().enumerate().map(|(l, (n, t, b))| json!({"level": l, "nodes": n, "triangles": t, "patch_bytes": b})).collect::<Vec<_>>(),
@@ -126,10 +133,18 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         "  bounding sphere center [{:.6}, {:.6}, {:.6}] radius {:.6}",
         h.bounding_sphere[0], h.bounding_sphere[1], h.bounding_sphere[2], h.bounding_sphere[3]
     );
+    let ix = m.index_stats();
     println!(
-        "  bytes           header 256, node table {}, patches {}",
-        h.node_count * 128,
+        "  bytes           header 256, index {}, patches {}",
+        ix.index_bytes - 256,
         h.patch_data_bytes
+    );
+    println!(
+        "  index           {:.1} bytes/node, {} pages of {} nodes; {} bytes to the first page",
+        ix.bytes_per_node(h.node_count),
+        ix.page_count,
+        ix.page_nodes,
+        ix.first_frame_bytes
     );
     println!(
         "  bytes/input tri {:.3}",

@@ -243,8 +243,8 @@ fn verify_passes_on_builds_and_fails_on_corruption() {
         assert!(all.contains("checksum"), "{all}");
     }
     let bad = dir.join("table.tsr");
-    flip_byte(&b.model_path, &bad, h.node_table_offset + 128 * 3 + 40);
-    verify_fails(&bad, "a corrupt node table", "node table");
+    flip_byte(&b.model_path, &bad, h.index_layout().pages_offset + 7);
+    verify_fails(&bad, "a corrupt index page", "index page 0");
     let bad = dir.join("header.tsr");
     flip_byte(&b.model_path, &bad, 100); // inside the cube origin
     verify_fails(&bad, "a corrupt header", "header");

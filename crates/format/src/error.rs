@@ -21,9 +21,12 @@ pub enum FormatError {
     /// The file does not start with [`crate::MAGIC`]: not a Tessera model.
     #[error("not a Tessera model file (bad magic bytes)")]
     BadMagic,
-    /// The file was written by a format version this code cannot read.
-    #[error("unsupported format version {found} (this build reads versions 1..={supported})")]
+    /// The file was written by a newer format version than this code reads.
+    #[error("unsupported format version {found} (this build reads version {supported}): it was written by a newer Tessera; update Tessera to open it")]
     UnsupportedVersion { found: u32, supported: u32 },
+    /// The file was written by an older format version, which this code no longer reads.
+    #[error("model file format version {found} is older than this Tessera's ({supported}): rebuild the model from its source mesh with `tessera build`")]
+    OldVersion { found: u32, supported: u32 },
     /// The file is shorter than its header (or the fixed header size) says.
     #[error("file truncated: expected {expected_bytes} bytes, found {actual_bytes}")]
     Truncated {
@@ -36,9 +39,13 @@ pub enum FormatError {
     /// The header's checksum is right but its fields are inconsistent.
     #[error("invalid header: {detail}")]
     InvalidHeader { detail: String },
-    /// The node table's CRC-32 does not match its bytes.
-    #[error("node table checksum mismatch (corrupt node table)")]
-    NodeTableChecksum,
+    /// A CRC-32 of the paged index (block table, a directory block, a page) does not
+    /// match its bytes.
+    #[error("index checksum mismatch in the {part} (corrupt index)")]
+    IndexChecksum { part: String },
+    /// An index page has the right checksum but does not decode.
+    #[error("corrupt index page {page}: {detail}")]
+    CorruptIndexPage { page: u64, detail: String },
     /// A patch's CRC-32 does not match its bytes.
     #[error("patch checksum mismatch for node {node} (corrupt patch data)")]
     PatchChecksum { node: u32 },

@@ -1,6 +1,6 @@
 //! A model's index parsed from bytes, independent of where the bytes come from.
 //!
-//! [`ModelIndex`] is the header and node table of a model, validated; it knows where
+//! [`ModelIndex`] is the header and node records of a model, validated; it knows where
 //! every patch lies ([`ModelIndex::patch_range`]) and decodes a patch from its bytes
 //! ([`ModelIndex::decode_patch`], CRC checked). It does no I/O: the bytes come from a
 //! [`ByteSource`] (a memory map, a byte slice, next an HTTP range client), so the same
@@ -8,23 +8,25 @@
 //!
 //! Reading a model is two steps: the first [`HEADER_BYTES`] give the [`Header`]
 //! ([`ModelIndex::parse_header`], which needs the total length of the source to check
-//! it), the header says how long the node table is ([`Header::index_bytes`]), and the
-//! table gives the index ([`ModelIndex::from_parts`]). [`ModelIndex::read`] does both
-//! over a [`ByteSource`].
+//! it), the header says how long the paged index is ([`Header::index_bytes`]), and its
+//! bytes give the index ([`ModelIndex::from_parts`]). [`ModelIndex::read`] does both
+//! over a [`ByteSource`]. The index's pages (`crate::pages`) can also be read one by
+//! one, so a remote reader fetches only the parts of the tree it needs.
 
 use std::borrow::Cow;
 use std::ops::Range;
 
-use bytemuck::Zeroable;
-
-use crate::codec::{self, PatchData};
+use crate::codec::{self, PatchData, PATCH_HEADER_BYTES};
 use crate::error::FormatError;
 use crate::grid::Grid;
+use crate::pages::{
+    decode_page, IndexLayout, PageEntry, DIRECTORY_BLOCK_PAGES, MAX_PAGE_NODES, PAGE_ENTRY_BYTES,
+};
 use crate::records::{header_crc32, Header, NodeRecord, FORMAT_VERSION, MAGIC, NO_NODE};
 
 /// Bytes of the header.
 pub const HEADER_BYTES: u64 = std::mem::size_of::<Header>() as u64;
-/// Bytes of one node record.
+/// Bytes of one node record in memory.
 pub const NODE_BYTES: u64 = std::mem::size_of::<NodeRecord>() as u64;
 
 /// Random-access bytes of a model: the one kind of I/O the reader needs.
@@ -97,18 +99,152 @@ fn invalid_header(detail: impl Into<String>) -> FormatError {
 }
 
 impl Header {
-    /// Bytes from the start of the file to the end of the node table: what a reader
-    /// needs before it can decode any patch.
+    /// Bytes from the start of the file to the end of the paged index (header, block
+    /// table, directory, pages): everything a reader holding the whole index reads before
+    /// any patch.
     pub fn index_bytes(&self) -> u64 {
-        HEADER_BYTES.saturating_add(self.node_count.saturating_mul(NODE_BYTES))
+        self.patch_data_offset
+    }
+
+    /// Where the parts of the paged index lie.
+    pub fn index_layout(&self) -> IndexLayout {
+        IndexLayout::new(self.node_count, self.page_nodes, HEADER_BYTES)
     }
 }
 
-/// A validated header and node table. See the module docs.
+/// Sizes of a model's paged index, for reports.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct IndexStats {
+    /// Bytes of the whole index, header included.
+    pub index_bytes: u64,
+    /// Bytes a paged reader reads before it can draw the roots: header, block table,
+    /// the first directory block and the first page.
+    pub first_frame_bytes: u64,
+    /// Nodes per page.
+    pub page_nodes: u32,
+    /// Pages.
+    pub page_count: u64,
+}
+
+impl IndexStats {
+    /// Index bytes per node.
+    pub fn bytes_per_node(&self, node_count: u64) -> f64 {
+        self.index_bytes as f64 / node_count.max(1) as f64
+    }
+}
+
+/// A validated header and the node records of its paged index. See the module docs.
 #[derive(Clone, Debug)]
 pub struct ModelIndex {
     header: Header,
     nodes: Vec<NodeRecord>,
+    stats: IndexStats,
+}
+
+/// Checks the block table's CRC and returns the CRC of each directory block.
+pub(crate) fn parse_block_table(header: &Header, bytes: &[u8]) -> Result<Vec<u32>, FormatError> {
+    let layout = header.index_layout();
+    let range = layout.block_table_range();
+    if bytes.len() as u64 != range.end - range.start {
+        return Err(invalid_header(format!(
+            "block table is {} bytes, expected {}",
+            bytes.len(),
+            range.end - range.start
+        )));
+    }
+    if crc32fast::hash(bytes) != header.block_table_crc32 {
+        return Err(FormatError::IndexChecksum {
+            part: "directory block table".into(),
+        });
+    }
+    Ok(bytes
+        .chunks_exact(4)
+        .map(|c| u32::from_le_bytes(c.try_into().expect("4 bytes")))
+        .collect())
+}
+
+/// Checks directory block `b` against its CRC and returns its entries, each checked to
+/// lie inside the pages section; entries within the block must follow each other.
+pub(crate) fn parse_directory_block(
+    header: &Header,
+    b: u64,
+    bytes: &[u8],
+    crc: u32,
+) -> Result<Vec<PageEntry>, FormatError> {
+    let layout = header.index_layout();
+    let range = layout.block_range(b);
+    if bytes.len() as u64 != range.end - range.start {
+        return Err(invalid_header(format!(
+            "directory block {b} is {} bytes, expected {}",
+            bytes.len(),
+            range.end - range.start
+        )));
+    }
+    if crc32fast::hash(bytes) != crc {
+        return Err(FormatError::IndexChecksum {
+            part: format!("directory block {b}"),
+        });
+    }
+    let entries: Vec<PageEntry> = bytes
+        .chunks_exact(PAGE_ENTRY_BYTES as usize)
+        .map(bytemuck::pod_read_unaligned)
+        .collect();
+    let first_page = b * DIRECTORY_BLOCK_PAGES;
+    for (k, e) in entries.iter().enumerate() {
+        let page = first_page + k as u64;
+        let end = e.offset.checked_add(e.bytes as u64);
+        if e.offset < layout.pages_offset || end.is_none_or(|end| end > header.patch_data_offset) {
+            return Err(FormatError::CorruptIndexPage {
+                page,
+                detail: format!(
+                    "directory puts it at {}+{}, outside the pages {}..{}",
+                    e.offset, e.bytes, layout.pages_offset, header.patch_data_offset
+                ),
+            });
+        }
+        if k > 0 && entries[k - 1].offset + entries[k - 1].bytes as u64 != e.offset {
+            return Err(FormatError::CorruptIndexPage {
+                page,
+                detail: "does not start where the previous page ends".into(),
+            });
+        }
+    }
+    Ok(entries)
+}
+
+/// Checks page `p`'s `frame` against its directory `entry` and decodes its nodes; each
+/// node's patch is checked to lie in the patch data. Returns the nodes and the absolute
+/// offset where the page's last patch ends.
+pub(crate) fn parse_page(
+    header: &Header,
+    p: u64,
+    entry: &PageEntry,
+    frame: &[u8],
+) -> Result<(Vec<NodeRecord>, u64), FormatError> {
+    if frame.len() as u64 != entry.bytes as u64 {
+        return Err(FormatError::CorruptIndexPage {
+            page: p,
+            detail: format!("{} bytes, the directory says {}", frame.len(), entry.bytes),
+        });
+    }
+    if crc32fast::hash(frame) != entry.crc32 {
+        return Err(FormatError::IndexChecksum {
+            part: format!("index page {p}"),
+        });
+    }
+    let layout = header.index_layout();
+    let nodes = layout.page_nodes_range(p, header.node_count);
+    let (records, end) = decode_page(
+        p,
+        frame,
+        (nodes.end - nodes.start) as usize,
+        header.patch_data_offset,
+    )?;
+    if end > header.file_bytes {
+        let last = nodes.end.saturating_sub(1) as u32;
+        return Err(FormatError::PatchOutOfRange { node: last });
+    }
+    Ok((records, end))
 }
 
 impl ModelIndex {
@@ -131,8 +267,14 @@ impl ModelIndex {
         if header.magic != MAGIC {
             return Err(FormatError::BadMagic);
         }
-        if header.version == 0 || header.version > FORMAT_VERSION {
+        if header.version > FORMAT_VERSION {
             return Err(FormatError::UnsupportedVersion {
+                found: header.version,
+                supported: FORMAT_VERSION,
+            });
+        }
+        if header.version < FORMAT_VERSION {
+            return Err(FormatError::OldVersion {
                 found: header.version,
                 supported: FORMAT_VERSION,
             });
@@ -157,35 +299,102 @@ impl ModelIndex {
     }
 
     /// The index from a checked `header` (from [`ModelIndex::parse_header`]) and the
-    /// node table's bytes (`header.node_count` records, from offset
-    /// `header.node_table_offset`): checks the table's CRC, every patch range and every
-    /// link index.
-    pub fn from_parts(header: Header, table: &[u8]) -> Result<ModelIndex, FormatError> {
-        let table_len = header.node_count.saturating_mul(NODE_BYTES);
-        if table.len() as u64 != table_len {
+    /// bytes of the whole paged index (from offset `header.index_offset` to
+    /// `header.patch_data_offset`): checks every CRC of the block table, directory and
+    /// pages, that pages and patches follow each other without gaps, every patch range
+    /// and every link index.
+    pub fn from_parts(header: Header, index: &[u8]) -> Result<ModelIndex, FormatError> {
+        let expected = header.patch_data_offset - header.index_offset;
+        if index.len() as u64 != expected {
             return Err(invalid_header(format!(
-                "node table is {} bytes, expected {table_len}",
-                table.len()
+                "index is {} bytes, expected {expected}",
+                index.len()
             )));
         }
-        if crc32fast::hash(table) != header.node_table_crc32 {
-            return Err(FormatError::NodeTableChecksum);
+        let layout = header.index_layout();
+        let at = |r: Range<u64>| {
+            &index[(r.start - HEADER_BYTES) as usize..(r.end - HEADER_BYTES) as usize]
+        };
+        let blocks = parse_block_table(&header, at(layout.block_table_range()))?;
+        // The header's node count was checked against the file length by
+        // `parse_header`, so this allocation is bounded by the source's size.
+        let mut nodes = Vec::with_capacity(header.node_count as usize);
+        let mut patch_end = header.patch_data_offset;
+        let mut page_end = layout.pages_offset;
+        let mut first_page_bytes = 0u64;
+        for (b, &crc) in blocks.iter().enumerate() {
+            let b = b as u64;
+            let entries = parse_directory_block(&header, b, at(layout.block_range(b)), crc)?;
+            for (k, e) in entries.iter().enumerate() {
+                let p = b * DIRECTORY_BLOCK_PAGES + k as u64;
+                if e.offset != page_end {
+                    return Err(FormatError::CorruptIndexPage {
+                        page: p,
+                        detail: format!(
+                            "starts at {}, the previous part ends at {page_end}",
+                            e.offset
+                        ),
+                    });
+                }
+                page_end = e.offset + e.bytes as u64;
+                let (records, end) = parse_page(&header, p, e, at(e.offset..page_end))?;
+                if records.first().is_some_and(|r| r.patch_offset != patch_end) {
+                    return Err(FormatError::CorruptIndexPage {
+                        page: p,
+                        detail: "its patches do not start where the previous page's end".into(),
+                    });
+                }
+                if p == 0 {
+                    first_page_bytes = e.bytes as u64;
+                }
+                patch_end = end;
+                nodes.extend(records);
+            }
         }
-        // The table's length was checked against the file length by `parse_header`, so
-        // this allocation is bounded by the source's size.
-        let mut nodes = vec![NodeRecord::zeroed(); header.node_count as usize];
-        bytemuck::cast_slice_mut::<NodeRecord, u8>(&mut nodes).copy_from_slice(table);
+        if page_end != header.patch_data_offset {
+            return Err(invalid_header(format!(
+                "index pages end at {page_end}, the patch data starts at {}",
+                header.patch_data_offset
+            )));
+        }
+        if patch_end != header.file_bytes {
+            return Err(invalid_header(format!(
+                "patches end at {patch_end}, the file at {}",
+                header.file_bytes
+            )));
+        }
         check_nodes(&header, &nodes)?;
-        Ok(ModelIndex { header, nodes })
+        let block0 = if layout.block_count > 0 {
+            let r = layout.block_range(0);
+            r.end - r.start
+        } else {
+            0
+        };
+        let stats = IndexStats {
+            index_bytes: header.patch_data_offset,
+            first_frame_bytes: layout.directory_offset + block0 + first_page_bytes,
+            page_nodes: header.page_nodes,
+            page_count: layout.page_count,
+        };
+        Ok(ModelIndex {
+            header,
+            nodes,
+            stats,
+        })
     }
 
-    /// Reads the header and node table from `source` (two reads) and validates them.
+    /// Reads the header and the paged index from `source` (two reads) and validates them.
     pub fn read<S: ByteSource + ?Sized>(source: &S) -> Result<ModelIndex, FormatError> {
         let total = source.len();
         let prefix = source.read(0..HEADER_BYTES.min(total))?;
         let header = Self::parse_header(&prefix, total)?;
-        let table = source.read(header.node_table_offset..header.index_bytes())?;
-        Self::from_parts(header, &table)
+        let index = source.read(header.index_offset..header.patch_data_offset)?;
+        Self::from_parts(header, &index)
+    }
+
+    /// Sizes of the paged index.
+    pub fn index_stats(&self) -> IndexStats {
+        self.stats
     }
 
     /// The header.
@@ -193,7 +402,7 @@ impl ModelIndex {
         &self.header
     }
 
-    /// The node table.
+    /// The node records, in node order.
     pub fn nodes(&self) -> &[NodeRecord] {
         &self.nodes
     }
@@ -256,20 +465,43 @@ fn check_header(h: &Header) -> Result<(), FormatError> {
             h.header_bytes
         )));
     }
-    if h.node_table_offset != HEADER_BYTES {
+    if h.index_offset != HEADER_BYTES {
         return Err(invalid_header(format!(
-            "node table at {}, expected {HEADER_BYTES}",
-            h.node_table_offset
+            "index at {}, expected {HEADER_BYTES}",
+            h.index_offset
         )));
     }
-    let table_end = h
-        .node_count
-        .checked_mul(NODE_BYTES)
-        .and_then(|b| b.checked_add(HEADER_BYTES));
-    if table_end != Some(h.patch_data_offset) {
+    if !(1..=MAX_PAGE_NODES).contains(&h.page_nodes) {
         return Err(invalid_header(format!(
-            "{} nodes do not end at the patch data offset {}",
-            h.node_count, h.patch_data_offset
+            "page_nodes {} not in 1..={MAX_PAGE_NODES}",
+            h.page_nodes
+        )));
+    }
+    if h.node_count >= NO_NODE as u64 {
+        return Err(invalid_header(format!(
+            "{} nodes: too many for u32 links",
+            h.node_count
+        )));
+    }
+    // Every patch has at least its header, which bounds the node count (and what a
+    // reader allocates for it) by the file's length.
+    if h.node_count.saturating_mul(PATCH_HEADER_BYTES as u64) > h.patch_data_bytes {
+        return Err(invalid_header(format!(
+            "{} nodes cannot fit in {} bytes of patch data",
+            h.node_count, h.patch_data_bytes
+        )));
+    }
+    let layout = h.index_layout();
+    if layout.page_count != h.page_count as u64 {
+        return Err(invalid_header(format!(
+            "page_count {} but {} nodes in pages of {} make {}",
+            h.page_count, h.node_count, h.page_nodes, layout.page_count
+        )));
+    }
+    if layout.pages_offset > h.patch_data_offset {
+        return Err(invalid_header(format!(
+            "the index directory ends at {}, after the patch data offset {}",
+            layout.pages_offset, h.patch_data_offset
         )));
     }
     if h.patch_data_offset.checked_add(h.patch_data_bytes) != Some(h.file_bytes) {

@@ -9,9 +9,10 @@
 //! [`Model`] and `verify_structure`; `write` (default) the atomic writer. Without them
 //! the crate builds for `wasm32-unknown-unknown`.
 //!
-//! Layout: [`Header`] (256 bytes) | node table (`node_count` x [`NodeRecord`], 128 bytes
-//! each, ordered by level then Morton code of the tetrahedron centre) | patch data (one
-//! encoded patch per node, in node-table order, each with its own CRC-32).
+//! Layout: [`Header`] (256 bytes) | paged index (a block table, a directory of pages, and
+//! zstd-compressed pages of node records, ordered by level then Morton code of the
+//! tetrahedron centre; read whole or page by page) | patch data (one encoded patch per
+//! node, in node order, each with its own CRC-32).
 
 #[cfg(feature = "write")]
 mod atomic;
@@ -19,6 +20,7 @@ mod codec;
 mod error;
 mod grid;
 mod index;
+mod pages;
 #[cfg(feature = "mmap")]
 mod reader;
 mod records;
@@ -35,7 +37,11 @@ pub use codec::{
 };
 pub use error::FormatError;
 pub use grid::Grid;
-pub use index::{ByteSource, ModelIndex, PatchReader, HEADER_BYTES, NODE_BYTES};
+pub use index::{ByteSource, IndexStats, ModelIndex, PatchReader, HEADER_BYTES, NODE_BYTES};
+pub use pages::{
+    decode_page, encode_page, stored_cone, IndexLayout, PageEntry, DEFAULT_PAGE_NODES,
+    DIRECTORY_BLOCK_PAGES, MAX_PAGE_NODES, PAGE_ENTRY_BYTES,
+};
 #[cfg(feature = "mmap")]
 pub use reader::{MappedFile, Model};
 pub use records::{
@@ -45,4 +51,4 @@ pub use records::{
 #[cfg(feature = "mmap")]
 pub use verify::{verify_structure, VerifyReport, MAX_PROBLEM_MESSAGES};
 #[cfg(feature = "write")]
-pub use writer::{write_model, PatchSpool, SpooledPatch};
+pub use writer::{encode_index, replace_index, write_model, PatchSpool, SpooledPatch};

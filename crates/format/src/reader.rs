@@ -1,9 +1,9 @@
 //! Reading local model files: a validated, memory-mapped [`Model`] (feature `mmap`).
 //!
 //! A model may be far larger than RAM, so patch data stays in the page cache via a
-//! memory map and is decoded on demand; the header and node table (small) are parsed
+//! memory map and is decoded on demand; the header and paged index (small) are parsed
 //! once into a [`ModelIndex`], which checks everything that can be checked without
-//! touching the patch data (magic, version, checksums of header and node table, sizes,
+//! touching the patch data (magic, version, checksums of header and index pages, sizes,
 //! ranges, link indices), so later accesses can trust the structure; each patch's own
 //! CRC is checked when it is read.
 //!

@@ -7,7 +7,7 @@ use bytemuck::{Pod, Zeroable};
 /// First 8 bytes of every model file.
 pub const MAGIC: [u8; 8] = *b"TESSERA\0";
 /// The version this code writes. Readers refuse files with a newer version.
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 /// `Header::attributes` bit: patches carry per-vertex normals.
 pub const ATTR_NORMALS: u32 = 1;
 /// `Header::attributes` bit: patches carry per-vertex RGBA8 colours.
@@ -36,8 +36,8 @@ pub struct Header {
     pub quant_bits: u32,
     /// Number of node records.
     pub node_count: u64,
-    /// Byte offset of the node table (256).
-    pub node_table_offset: u64,
+    /// Byte offset of the paged index (256): block table, directory, pages.
+    pub index_offset: u64,
     /// Byte offset of the first patch.
     pub patch_data_offset: u64,
     /// Total bytes of patch data.
@@ -66,15 +66,21 @@ pub struct Header {
     pub leaf_triangles_max: u32,
     /// Builder setting: target triangles per internal node.
     pub node_triangles_target: u32,
-    /// CRC-32 of the node table bytes.
-    pub node_table_crc32: u32,
+    /// CRC-32 of the directory's block table.
+    pub block_table_crc32: u32,
     /// CRC-32 of the header bytes with this field set to zero.
     pub header_crc32: u32,
+    /// Nodes per index page (the last page may hold fewer).
+    pub page_nodes: u32,
+    /// Number of index pages: `node_count` / `page_nodes`, rounded up.
+    pub page_count: u32,
     /// Zero.
-    pub reserved: [u32; 21],
+    pub reserved: [u32; 19],
 }
 
-/// One tetrahedron of the forest and its patch. 128 bytes.
+/// One tetrahedron of the forest and its patch, as the reader holds it in memory (128
+/// bytes). Since format version 2 the file stores records packed into index pages
+/// (`crate::pages`), from which every field here is restored exactly.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct NodeRecord {

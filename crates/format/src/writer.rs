@@ -14,6 +14,10 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use crate::atomic::AtomicFile;
 use crate::error::FormatError;
+use crate::pages::{
+    encode_page, IndexLayout, PageEntry, DEFAULT_PAGE_NODES, DIRECTORY_BLOCK_PAGES,
+    PAGE_ENTRY_BYTES,
+};
 use crate::records::{header_crc32, Header, NodeRecord, FORMAT_VERSION, MAGIC};
 
 /// Where one patch lies in a [`PatchSpool`].
@@ -172,12 +176,102 @@ fn read_exact_at(file: &File, mut buf: &mut [u8], mut offset: u64) -> std::io::R
     Ok(())
 }
 
+/// The complete header and the paged index (block table, directory, pages: the bytes
+/// from [`Header::index_offset`] to the patch data) of a model whose node records are
+/// `nodes`, with each `patch_offset` relative to the start of the patch data and the
+/// patches following each other in node order. The header is `header` with the fields
+/// [`write_model`] fills in set.
+pub fn encode_index(
+    header: &Header,
+    nodes: &[NodeRecord],
+) -> Result<(Header, Vec<u8>), FormatError> {
+    let header_bytes = std::mem::size_of::<Header>() as u64;
+    let page_nodes = if header.page_nodes == 0 {
+        DEFAULT_PAGE_NODES
+    } else {
+        header.page_nodes
+    };
+    let layout = IndexLayout::new(nodes.len() as u64, page_nodes, header_bytes);
+    let mut rel = 0u64;
+    for (i, n) in nodes.iter().enumerate() {
+        if n.patch_offset != rel {
+            return Err(FormatError::InvalidInput {
+                detail: format!("node {i}'s patch does not follow the previous node's"),
+            });
+        }
+        rel += n.patch_bytes as u64;
+    }
+    let frames: Vec<Vec<u8>> = nodes
+        .chunks(page_nodes as usize)
+        .map(|page| encode_page(page, page[0].patch_offset))
+        .collect();
+    let mut directory = Vec::with_capacity(frames.len());
+    let mut at = layout.pages_offset;
+    for f in &frames {
+        directory.push(PageEntry {
+            offset: at,
+            bytes: f.len() as u32,
+            crc32: crc32fast::hash(f),
+        });
+        at += f.len() as u64;
+    }
+    let directory_bytes: &[u8] = bytemuck::cast_slice(&directory);
+    let mut index: Vec<u8> = directory_bytes
+        .chunks((DIRECTORY_BLOCK_PAGES * PAGE_ENTRY_BYTES) as usize)
+        .flat_map(|b| crc32fast::hash(b).to_le_bytes())
+        .collect();
+
+    let mut h = *header;
+    h.magic = MAGIC;
+    h.version = FORMAT_VERSION;
+    h.header_bytes = header_bytes as u32;
+    h.node_count = nodes.len() as u64;
+    h.index_offset = header_bytes;
+    h.page_nodes = page_nodes;
+    h.page_count = u32::try_from(layout.page_count).map_err(|_| FormatError::InvalidInput {
+        detail: format!("{} index pages", layout.page_count),
+    })?;
+    h.patch_data_offset = at;
+    h.patch_data_bytes = rel;
+    h.file_bytes = at + rel;
+    h.reserved = [0; 19];
+    h.block_table_crc32 = crc32fast::hash(&index);
+    h.header_crc32 = header_crc32(&h);
+    index.extend_from_slice(directory_bytes);
+    for f in &frames {
+        index.extend_from_slice(f);
+    }
+    Ok((h, index))
+}
+
+/// `model` (the bytes of a model file, header checked) with its node records replaced
+/// by `nodes` (absolute `patch_offset`s as [`crate::ModelIndex::nodes`] gives them; the
+/// patch bytes, counts and CRCs as given) and the index re-encoded: what a writer with a
+/// bug in its records would produce, for tests of the checks downstream.
+pub fn replace_index(model: &[u8], nodes: &[NodeRecord]) -> Result<Vec<u8>, FormatError> {
+    let h = crate::ModelIndex::parse_header(model, model.len() as u64)?;
+    let patches = &model[h.patch_data_offset as usize..];
+    let mut rel: Vec<NodeRecord> = nodes.to_vec();
+    let mut at = 0u64;
+    for n in &mut rel {
+        n.patch_offset = at;
+        at += n.patch_bytes as u64;
+    }
+    let (hh, index) = encode_index(&h, &rel)?;
+    let mut b = bytemuck::bytes_of(&hh).to_vec();
+    b.extend_from_slice(&index);
+    b.extend_from_slice(patches);
+    Ok(b)
+}
+
 /// Writes a complete model file atomically.
 ///
 /// `nodes[i]`'s patch is `patches[i]` in `spool`. Fills in the header's `magic`,
-/// `version`, `header_bytes`, `node_count`, the offsets, `patch_data_bytes`,
-/// `file_bytes`, both checksums and `reserved`, and each node's `patch_offset`,
-/// `patch_bytes`, `patch_crc32` and `reserved`; everything else is written as given.
+/// `version`, `header_bytes`, `node_count`, the offsets, `page_count`, `page_nodes`
+/// (when 0: [`DEFAULT_PAGE_NODES`]), `patch_data_bytes`, `file_bytes`, both checksums
+/// and `reserved`, and each node's `patch_offset`, `patch_bytes` and `patch_crc32`;
+/// everything else is written as given. The node records go into the paged index
+/// (`docs/format.md`).
 /// The file appears at `path` only once complete and synced; on error nothing is left
 /// behind and a pre-existing file at `path` is untouched.
 pub fn write_model(
@@ -192,39 +286,25 @@ pub fn write_model(
             detail: format!("{} nodes but {} patches", nodes.len(), patches.len()),
         });
     }
-    let header_bytes = std::mem::size_of::<Header>() as u64;
-    let node_table_bytes = (nodes.len() as u64) * std::mem::size_of::<NodeRecord>() as u64;
-    let patch_data_offset = header_bytes + node_table_bytes;
-
+    // Patch offsets relative to the patch data: pages store them so, which lets the
+    // pages be encoded before their own total size (and so the patch data offset) is
+    // known.
     let mut table: Vec<NodeRecord> = nodes.to_vec();
-    let mut offset = patch_data_offset;
+    let mut rel = 0u64;
     for (node, patch) in table.iter_mut().zip(patches) {
-        node.patch_offset = offset;
+        node.patch_offset = rel;
         node.patch_bytes = patch.bytes;
         node.patch_crc32 = patch.crc32;
         node.reserved = [0; 3];
-        offset += patch.bytes as u64;
+        rel += patch.bytes as u64;
     }
-    let table_bytes: &[u8] = bytemuck::cast_slice(&table);
-
-    let mut h = *header;
-    h.magic = MAGIC;
-    h.version = FORMAT_VERSION;
-    h.header_bytes = header_bytes as u32;
-    h.node_count = nodes.len() as u64;
-    h.node_table_offset = header_bytes;
-    h.patch_data_offset = patch_data_offset;
-    h.patch_data_bytes = offset - patch_data_offset;
-    h.file_bytes = offset;
-    h.reserved = [0; 21];
-    h.node_table_crc32 = crc32fast::hash(table_bytes);
-    h.header_crc32 = header_crc32(&h);
+    let (h, index) = encode_index(header, &table)?;
 
     let mut out = AtomicFile::create(path, 8 << 20)?;
     let tmp_path = out.tmp_path().to_path_buf();
     let io = |e: std::io::Error| FormatError::io(&tmp_path, e);
     out.write_all(bytemuck::bytes_of(&h)).map_err(io)?;
-    out.write_all(table_bytes).map_err(io)?;
+    out.write_all(&index).map_err(io)?;
     let mut buf = Vec::new();
     for (i, patch) in patches.iter().enumerate() {
         buf.resize(patch.bytes as usize, 0);

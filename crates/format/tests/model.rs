@@ -152,10 +152,21 @@ fn corruption_is_detected() {
     assert!(matches!(e, FormatError::BadMagic), "{e}");
     let e = f.open_bytes("hdr", &flip(&good, 100)).unwrap_err();
     assert!(matches!(e, FormatError::HeaderChecksum), "{e}");
-    let e = f
-        .open_bytes("table", &flip(&good, 256 + 128 + 60))
-        .unwrap_err();
-    assert!(matches!(e, FormatError::NodeTableChecksum), "{e}");
+    // Every part of the paged index is checked: block table, directory, a page.
+    let layout = h.index_layout();
+    for (part, at) in [
+        ("directory block table", layout.block_table_offset + 1),
+        ("directory block 0", layout.directory_offset + 9),
+        ("index page 0", layout.pages_offset + 5),
+    ] {
+        let e = f
+            .open_bytes("index", &flip(&good, at as usize))
+            .unwrap_err();
+        assert!(
+            matches!(&e, FormatError::IndexChecksum { part: p } if p == part),
+            "{part}: {e}"
+        );
+    }
 
     // Newer version, with and without a recomputed header CRC.
     let mut b = good.clone();
@@ -165,8 +176,8 @@ fn corruption_is_detected() {
         matches!(
             e,
             FormatError::UnsupportedVersion {
-                found: 2,
-                supported: 1
+                found: 3,
+                supported: 2
             }
         ),
         "{e}"
@@ -177,6 +188,25 @@ fn corruption_is_detected() {
     b[..256].copy_from_slice(bytemuck::bytes_of(&hh));
     let e = f.open_bytes("ver2", &b).unwrap_err();
     assert!(matches!(e, FormatError::UnsupportedVersion { .. }), "{e}");
+    assert!(e.to_string().contains("newer Tessera"), "{e}");
+
+    // An older version (1: a flat node table of 128-byte records) says to rebuild.
+    let mut hh = h;
+    hh.version = 1;
+    hh.header_crc32 = header_crc32(&hh);
+    b[..256].copy_from_slice(bytemuck::bytes_of(&hh));
+    let e = f.open_bytes("ver0", &b).unwrap_err();
+    assert!(
+        matches!(
+            e,
+            FormatError::OldVersion {
+                found: 1,
+                supported: 2
+            }
+        ),
+        "{e}"
+    );
+    assert!(e.to_string().contains("rebuild"), "{e}");
 
     // Truncations.
     for cut in [0, 7, 8, 100, 255, 256, 300, good.len() - 1] {
@@ -203,13 +233,6 @@ fn corruption_is_detected() {
     let report = verify_structure(&bad);
     assert_eq!(report.problem_count, 1, "{:?}", report.problems);
 
-    // Patch range outside the patch section (valid checksums, bad offset).
-    let mut nodes = m.nodes().to_vec();
-    nodes[1].patch_offset = h.file_bytes - 4;
-    let b = with_nodes(&good, &h, &nodes);
-    let e = f.open_bytes("range", &b).unwrap_err();
-    assert!(matches!(e, FormatError::PatchOutOfRange { node: 1 }), "{e}");
-
     // Child index out of range.
     let mut nodes = m.nodes().to_vec();
     nodes[0].children[1] = 77;
@@ -232,16 +255,9 @@ fn corruption_is_detected() {
     assert!(e.to_string().contains("node 3"), "{e}");
 }
 
-/// Replaces the node table of a valid file and recomputes both checksums.
-fn with_nodes(good: &[u8], h: &Header, nodes: &[NodeRecord]) -> Vec<u8> {
-    let mut b = good.to_vec();
-    let table: &[u8] = bytemuck::cast_slice(nodes);
-    b[256..256 + table.len()].copy_from_slice(table);
-    let mut hh = *h;
-    hh.node_table_crc32 = crc32fast::hash(table);
-    hh.header_crc32 = header_crc32(&hh);
-    b[..256].copy_from_slice(bytemuck::bytes_of(&hh));
-    b
+/// Replaces the node records of a valid file (patches kept) and re-encodes its index.
+fn with_nodes(good: &[u8], _h: &Header, nodes: &[NodeRecord]) -> Vec<u8> {
+    replace_index(good, nodes).unwrap()
 }
 
 #[test]
@@ -271,8 +287,10 @@ fn verify_flags_structural_problems() {
     n[1].saturated_sphere = n[1].tight_sphere;
     check(&n, None, "outside the tight sphere");
     let mut n = f.nodes.clone();
+    // An index page stores a diamond's error and sphere once, so a node moved into
+    // another diamond takes that diamond's sphere, which no longer holds its patch.
     n[3].diamond = n[2].diamond;
-    check(&n, None, "diamond");
+    check(&n, None, "node 3: 7 vertices outside the tight sphere");
     let mut n = f.nodes.clone();
     n[3].flags = 0;
     check(&n, None, "leaf flag");
@@ -349,9 +367,14 @@ fn documented_offsets() {
     assert_eq!(offset_of!(Header, cube_origin), 80);
     assert_eq!(offset_of!(Header, bounding_sphere), 112);
     assert_eq!(offset_of!(Header, root_count), 144);
-    assert_eq!(offset_of!(Header, node_table_crc32), 164);
+    assert_eq!(offset_of!(Header, index_offset), 32);
+    assert_eq!(offset_of!(Header, block_table_crc32), 164);
     assert_eq!(offset_of!(Header, header_crc32), 168);
-    assert_eq!(offset_of!(Header, reserved), 172);
+    assert_eq!(offset_of!(Header, page_nodes), 172);
+    assert_eq!(offset_of!(Header, page_count), 176);
+    assert_eq!(offset_of!(Header, reserved), 180);
+    assert_eq!(offset_of!(PageEntry, bytes), 8);
+    assert_eq!(offset_of!(PageEntry, crc32), 12);
     assert_eq!(offset_of!(NodeRecord, patch_bytes), 16);
     assert_eq!(offset_of!(NodeRecord, children), 32);
     assert_eq!(offset_of!(NodeRecord, level), 48);
