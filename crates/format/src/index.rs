@@ -137,8 +137,36 @@ impl IndexStats {
 #[derive(Clone, Debug)]
 pub struct ModelIndex {
     header: Header,
+    /// Every record read so far, in node order.
     nodes: Vec<NodeRecord>,
+    /// How many of them the index shows: all when every page is read, else the nodes of
+    /// the complete levels among them (a tree cut off at a level).
+    visible: usize,
     stats: IndexStats,
+    /// CRCs of the directory blocks, the directory entries read so far (whole blocks)
+    /// and where the last read page's patches end.
+    blocks: Vec<u32>,
+    entries: Vec<PageEntry>,
+    patch_end: u64,
+}
+
+/// Bytes of the paged index held as a slice starting at file offset `start`.
+struct IndexSlice<'a> {
+    bytes: &'a [u8],
+    start: u64,
+}
+
+impl ByteSource for IndexSlice<'_> {
+    fn len(&self) -> u64 {
+        self.start + self.bytes.len() as u64
+    }
+    fn read(&self, range: Range<u64>) -> Result<Cow<'_, [u8]>, FormatError> {
+        let shifted = range.start.saturating_sub(self.start)..range.end.saturating_sub(self.start);
+        if range.start < self.start {
+            return Err(invalid_header("index read before the index"));
+        }
+        self.bytes.read(shifted)
+    }
 }
 
 /// Checks the block table's CRC and returns the CRC of each directory block.
@@ -311,76 +339,11 @@ impl ModelIndex {
                 index.len()
             )));
         }
-        let layout = header.index_layout();
-        let at = |r: Range<u64>| {
-            &index[(r.start - HEADER_BYTES) as usize..(r.end - HEADER_BYTES) as usize]
+        let src = IndexSlice {
+            bytes: index,
+            start: header.index_offset,
         };
-        let blocks = parse_block_table(&header, at(layout.block_table_range()))?;
-        // The header's node count was checked against the file length by
-        // `parse_header`, so this allocation is bounded by the source's size.
-        let mut nodes = Vec::with_capacity(header.node_count as usize);
-        let mut patch_end = header.patch_data_offset;
-        let mut page_end = layout.pages_offset;
-        let mut first_page_bytes = 0u64;
-        for (b, &crc) in blocks.iter().enumerate() {
-            let b = b as u64;
-            let entries = parse_directory_block(&header, b, at(layout.block_range(b)), crc)?;
-            for (k, e) in entries.iter().enumerate() {
-                let p = b * DIRECTORY_BLOCK_PAGES + k as u64;
-                if e.offset != page_end {
-                    return Err(FormatError::CorruptIndexPage {
-                        page: p,
-                        detail: format!(
-                            "starts at {}, the previous part ends at {page_end}",
-                            e.offset
-                        ),
-                    });
-                }
-                page_end = e.offset + e.bytes as u64;
-                let (records, end) = parse_page(&header, p, e, at(e.offset..page_end))?;
-                if records.first().is_some_and(|r| r.patch_offset != patch_end) {
-                    return Err(FormatError::CorruptIndexPage {
-                        page: p,
-                        detail: "its patches do not start where the previous page's end".into(),
-                    });
-                }
-                if p == 0 {
-                    first_page_bytes = e.bytes as u64;
-                }
-                patch_end = end;
-                nodes.extend(records);
-            }
-        }
-        if page_end != header.patch_data_offset {
-            return Err(invalid_header(format!(
-                "index pages end at {page_end}, the patch data starts at {}",
-                header.patch_data_offset
-            )));
-        }
-        if patch_end != header.file_bytes {
-            return Err(invalid_header(format!(
-                "patches end at {patch_end}, the file at {}",
-                header.file_bytes
-            )));
-        }
-        check_nodes(&header, &nodes)?;
-        let block0 = if layout.block_count > 0 {
-            let r = layout.block_range(0);
-            r.end - r.start
-        } else {
-            0
-        };
-        let stats = IndexStats {
-            index_bytes: header.patch_data_offset,
-            first_frame_bytes: layout.directory_offset + block0 + first_page_bytes,
-            page_nodes: header.page_nodes,
-            page_count: layout.page_count,
-        };
-        Ok(ModelIndex {
-            header,
-            nodes,
-            stats,
-        })
+        Self::start(header, &src)?.grown(&src, u64::MAX)
     }
 
     /// Reads the header and the paged index from `source` (two reads) and validates them.
@@ -390,6 +353,159 @@ impl ModelIndex {
         let header = Self::parse_header(&prefix, total)?;
         let index = source.read(header.index_offset..header.patch_data_offset)?;
         Self::from_parts(header, &index)
+    }
+
+    /// Reads only the top of the index from `source`: the header, the block table and
+    /// the first `pages` pages (at least enough for the roots) with the directory blocks
+    /// naming them. The index then shows the complete levels among the nodes read (see
+    /// [`ModelIndex::is_complete`]); [`ModelIndex::grown`] reads more.
+    pub fn read_top<S: ByteSource + ?Sized>(
+        source: &S,
+        pages: u64,
+    ) -> Result<ModelIndex, FormatError> {
+        let total = source.len();
+        let prefix = source.read(0..HEADER_BYTES.min(total))?;
+        let header = Self::parse_header(&prefix, total)?;
+        let mut index = Self::start(header, source)?.grown(source, pages.max(1))?;
+        // Pages smaller than the root level: read on until the roots are shown.
+        while index.visible < header.root_count as usize && !index.is_complete() {
+            let more = 2 * index.loaded_pages();
+            index = index.grown(source, more)?;
+        }
+        Ok(index)
+    }
+
+    /// An index with no pages read yet: header and block table.
+    fn start<S: ByteSource + ?Sized>(
+        header: Header,
+        source: &S,
+    ) -> Result<ModelIndex, FormatError> {
+        let layout = header.index_layout();
+        let blocks = parse_block_table(&header, &source.read(layout.block_table_range())?)?;
+        let block0 = if layout.block_count > 0 {
+            let r = layout.block_range(0);
+            r.end - r.start
+        } else {
+            0
+        };
+        Ok(ModelIndex {
+            header,
+            nodes: Vec::new(),
+            visible: 0,
+            stats: IndexStats {
+                index_bytes: header.patch_data_offset,
+                first_frame_bytes: layout.directory_offset + block0,
+                page_nodes: header.page_nodes,
+                page_count: layout.page_count,
+            },
+            blocks,
+            entries: Vec::new(),
+            patch_end: header.patch_data_offset,
+        })
+    }
+
+    /// Pages read so far.
+    pub fn loaded_pages(&self) -> u64 {
+        self.header
+            .index_layout()
+            .page_count
+            .min((self.nodes.len() as u64).div_ceil(self.header.page_nodes.max(1) as u64))
+    }
+
+    /// Whether every page has been read (the index shows every node).
+    pub fn is_complete(&self) -> bool {
+        self.nodes.len() as u64 == self.header.node_count
+    }
+
+    /// This index with pages read up to `pages` (at most all), from `source`: the
+    /// directory blocks not read yet in one read, the new pages in another. Every part is
+    /// checked as [`ModelIndex::from_parts`] checks it.
+    pub fn grown<S: ByteSource + ?Sized>(
+        &self,
+        source: &S,
+        pages: u64,
+    ) -> Result<ModelIndex, FormatError> {
+        let h = self.header;
+        let layout = h.index_layout();
+        let target = pages.min(layout.page_count);
+        let from = self.loaded_pages();
+        let mut next = self.clone();
+        if target <= from {
+            return Ok(next);
+        }
+        // Directory blocks.
+        let have_blocks = (next.entries.len() as u64).div_ceil(DIRECTORY_BLOCK_PAGES);
+        let need_blocks = target.div_ceil(DIRECTORY_BLOCK_PAGES);
+        if need_blocks > have_blocks {
+            let start = layout.block_range(have_blocks).start;
+            let end = layout.block_range(need_blocks - 1).end;
+            let bytes = source.read(start..end)?;
+            for b in have_blocks..need_blocks {
+                let r = layout.block_range(b);
+                let slice = &bytes[(r.start - start) as usize..(r.end - start) as usize];
+                let entries = parse_directory_block(&h, b, slice, next.blocks[b as usize])?;
+                let expected = next
+                    .entries
+                    .last()
+                    .map_or(layout.pages_offset, |e| e.offset + e.bytes as u64);
+                if entries.first().is_some_and(|e| e.offset != expected) {
+                    return Err(FormatError::CorruptIndexPage {
+                        page: b * DIRECTORY_BLOCK_PAGES,
+                        detail: format!(
+                            "starts at {}, the previous part ends at {expected}",
+                            entries[0].offset
+                        ),
+                    });
+                }
+                next.entries.extend(entries);
+            }
+        }
+        // Pages, contiguous in the file: one read.
+        let first = next.entries[from as usize];
+        let last = next.entries[target as usize - 1];
+        let pages_end = last.offset + last.bytes as u64;
+        let bytes = source.read(first.offset..pages_end)?;
+        for p in from..target {
+            let e = next.entries[p as usize];
+            let slice = &bytes[(e.offset - first.offset) as usize
+                ..(e.offset - first.offset + e.bytes as u64) as usize];
+            let (records, end) = parse_page(&h, p, &e, slice)?;
+            if records
+                .first()
+                .is_some_and(|r| r.patch_offset != next.patch_end)
+            {
+                return Err(FormatError::CorruptIndexPage {
+                    page: p,
+                    detail: "its patches do not start where the previous page's end".into(),
+                });
+            }
+            if p == 0 {
+                next.stats.first_frame_bytes += e.bytes as u64;
+            }
+            next.patch_end = end;
+            check_nodes(&h, &records, next.nodes.len())?;
+            next.nodes.extend(records);
+        }
+        if target == layout.page_count {
+            if pages_end != h.patch_data_offset {
+                return Err(invalid_header(format!(
+                    "index pages end at {pages_end}, the patch data starts at {}",
+                    h.patch_data_offset
+                )));
+            }
+            if next.patch_end != h.file_bytes {
+                return Err(invalid_header(format!(
+                    "patches end at {}, the file at {}",
+                    next.patch_end, h.file_bytes
+                )));
+            }
+            next.visible = next.nodes.len();
+        } else {
+            // Show the complete levels: drop the level the last page ends in.
+            let last_level = next.nodes.last().map_or(0, |n| n.level);
+            next.visible = next.nodes.partition_point(|n| n.level < last_level);
+        }
+        Ok(next)
     }
 
     /// Sizes of the paged index.
@@ -404,14 +520,21 @@ impl ModelIndex {
 
     /// The node records, in node order.
     pub fn nodes(&self) -> &[NodeRecord] {
-        &self.nodes
+        &self.nodes[..self.visible]
     }
 
     /// Node `i`'s record, or an error naming the node.
     pub fn node(&self, i: usize) -> Result<&NodeRecord, FormatError> {
-        self.nodes.get(i).ok_or_else(|| FormatError::InvalidNode {
+        self.nodes().get(i).ok_or_else(|| FormatError::InvalidNode {
             node: i as u32,
-            detail: format!("no such node (model has {})", self.nodes.len()),
+            detail: if self.is_complete() || i as u64 >= self.header.node_count {
+                format!("no such node (model has {})", self.header.node_count)
+            } else {
+                format!(
+                    "not in the part of the index read so far ({} nodes)",
+                    self.visible
+                )
+            },
         })
     }
 
@@ -436,7 +559,7 @@ impl ModelIndex {
     /// Checks and decodes node `i`'s patch from its encoded `bytes`.
     pub fn decode_patch(&self, i: usize, bytes: &[u8]) -> Result<PatchData, FormatError> {
         self.check_patch(i, bytes)?;
-        codec::decode_patch(bytes, self.header.attributes, (&self.nodes[i]).into())
+        codec::decode_patch(bytes, self.header.attributes, self.node(i)?.into())
             .map_err(|e| e.with_node(i as u32))
     }
 
@@ -538,12 +661,13 @@ fn check_header(h: &Header) -> Result<(), FormatError> {
 }
 
 /// Every patch inside the patch data, every link a valid index other than the node's own.
-fn check_nodes(h: &Header, nodes: &[NodeRecord]) -> Result<(), FormatError> {
+/// `nodes` are the records of nodes `first..`.
+fn check_nodes(h: &Header, nodes: &[NodeRecord], first: usize) -> Result<(), FormatError> {
     let count = h.node_count;
     let patch_start = h.patch_data_offset;
     let patch_end = h.patch_data_offset + h.patch_data_bytes;
     for (i, n) in nodes.iter().enumerate() {
-        let node = i as u32;
+        let node = (first + i) as u32;
         let end = n.patch_offset.checked_add(n.patch_bytes as u64);
         if n.patch_offset < patch_start || end.is_none_or(|e| e > patch_end) {
             return Err(FormatError::PatchOutOfRange { node });
