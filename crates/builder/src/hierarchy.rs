@@ -633,6 +633,7 @@ fn finalize(
         max_error,
         leaf_triangles_max: opts.leaf_triangles,
         node_triangles_target: opts.node_triangles,
+        page_nodes: opts.index_page_nodes,
         ..bytemuck::Zeroable::zeroed()
     };
     write_model(output, &header, &records, &patches, &ctx.out)?;

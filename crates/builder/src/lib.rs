@@ -52,6 +52,10 @@ pub struct BuildOptions {
     pub node_triangles: u32,
     /// Where temporary files go (default: beside the output).
     pub tmp_dir: Option<PathBuf>,
+    /// Nodes per index page (default [`tessera_format::DEFAULT_PAGE_NODES`]): smaller
+    /// pages let a remote reader fetch less of the tree it does not need, larger ones
+    /// compress better.
+    pub index_page_nodes: u32,
 }
 
 impl Default for BuildOptions {
@@ -63,6 +67,7 @@ impl Default for BuildOptions {
             leaf_triangles: 4000,
             node_triangles: 2000,
             tmp_dir: None,
+            index_page_nodes: tessera_format::DEFAULT_PAGE_NODES,
         }
     }
 }

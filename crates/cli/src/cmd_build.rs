@@ -33,6 +33,11 @@ pub struct Args {
     /// Directory for temporary files (default: beside the output).
     #[arg(long)]
     tmp_dir: Option<PathBuf>,
+    /// Nodes per index page (1..=65536): what a remote reader fetches of the tree at a
+    /// time.
+    #[arg(long, default_value_t = tessera_format::DEFAULT_PAGE_NODES,
+          value_parser = clap::value_parser!(u32).range(1..=tessera_format::MAX_PAGE_NODES as i64))]
+    index_page_nodes: u32,
     /// Print the report as JSON on stdout.
     #[arg(long)]
     json: bool,
@@ -49,6 +54,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         leaf_triangles: a.leaf_triangles,
         node_triangles: a.node_triangles,
         tmp_dir: a.tmp_dir,
+        index_page_nodes: a.index_page_nodes,
     };
     let bars = Bars::new(a.quiet || a.json);
     crate::progress::install_interrupt_handler();

@@ -70,7 +70,8 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     if a.orbit == Some(0) {
         bail!("--orbit needs at least one frame");
     }
-    let model = crate::open::open_model(&a.model)
+    let progressive = !(a.full_resolution || a.complete);
+    let model = crate::open::open_model_paged(&a.model, progressive)
         .with_context(|| format!("cannot open {}", a.model.display()))?;
     let path = match (&a.path, a.orbit) {
         (Some(p), _) => CameraPath::from_file(p, a.width, a.height)?,
@@ -102,6 +103,8 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     let t_open = Instant::now();
     let mut viewer = Viewer::new(model.clone(), opts)?;
     let setup_ms = t_open.elapsed().as_secs_f64() * 1e3;
+    // What a remote model transferred to show the roots (its index top and root patches).
+    let at_first_frame = model.transfer();
     let adapter = viewer.gpu().adapter_label.clone();
     let cameras = path.cameras();
     let mut frames: Vec<serde_json::Value> = Vec::with_capacity(cameras.len());
@@ -115,6 +118,11 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         let rss = tessera_build::current_rss_bytes();
         let mut v = serde_json::to_value(&s)?;
         v["rss_bytes"] = json!(rss);
+        if let Some((bytes, requests)) = model.transfer() {
+            v["remote_bytes"] = json!(bytes);
+            v["remote_requests"] = json!(requests);
+            v["index_nodes"] = json!(viewer.scheduler().node_count());
+        }
         frames.push(v);
         all.push(s);
     }
@@ -130,7 +138,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         n if n % 2 == 1 => sorted[n / 2],
         n => 0.5 * (sorted[n / 2 - 1] + sorted[n / 2]),
     };
-    let summary = json!({
+    let mut summary = json!({
         "frames": all.len(),
         "mode": mode,
         "mean_frame_ms": mean(&|s| s.frame_ms),
@@ -143,6 +151,14 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         "peak_rss_bytes": peak_rss,
         "setup_ms": setup_ms,
     });
+    if let (Some((b0, r0)), Some((b, r))) = (at_first_frame, model.transfer()) {
+        summary["remote"] = json!({
+            "first_frame_bytes": b0,
+            "first_frame_requests": r0,
+            "bytes": b,
+            "requests": r,
+        });
+    }
     if let Some(p) = &a.stats {
         let doc = json!({
             "model": a.model.display().to_string(),
@@ -167,6 +183,11 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         summary["mean_selection_ms"].as_f64().unwrap_or(0.0),
         peak_rss >> 20,
     );
+    if let (Some((b0, r0)), Some((b, r))) = (at_first_frame, model.transfer()) {
+        println!(
+            "remote: {b0} bytes in {r0} requests before the first frame, {b} bytes in {r} requests in all"
+        );
+    }
     let failed = all.last().map_or(0, |s| s.failed_patches);
     if failed > 0 {
         eprintln!("warning: {failed} corrupt patch(es) skipped; their parents were drawn");

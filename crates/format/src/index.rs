@@ -15,6 +15,7 @@
 
 use std::borrow::Cow;
 use std::ops::Range;
+use std::sync::Arc;
 
 use crate::codec::{self, PatchData, PATCH_HEADER_BYTES};
 use crate::error::FormatError;
@@ -84,6 +85,22 @@ pub trait PatchReader: Send + Sync {
     /// to fetch patches adjacent in the file with one read. Default: one by one.
     fn decode_patches(&self, nodes: &[usize]) -> Vec<Result<PatchData, FormatError>> {
         nodes.iter().map(|&i| self.decode_patch(i)).collect()
+    }
+    /// A paged index read in part and grown since [`PatchReader::index`] was made: the
+    /// latest index (showing at least the nodes `index()` shows). Default: none.
+    fn latest_index(&self) -> Option<Arc<ModelIndex>> {
+        None
+    }
+    /// Reads more of a paged index read in part (blocking: run it off the frame's
+    /// thread); true when [`PatchReader::latest_index`] then shows more nodes. Default:
+    /// false (the index is whole).
+    fn grow_index(&self) -> bool {
+        false
+    }
+    /// For a model read over a network: bytes and requests transferred so far.
+    /// Default: none (a local file).
+    fn transfer(&self) -> Option<(u64, u64)> {
+        None
     }
     /// A hint that node `i`'s patch will be read soon (e.g. kernel read-ahead).
     /// Default: nothing.

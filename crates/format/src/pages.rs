@@ -513,8 +513,8 @@ pub fn decode_page(
     let own_tight: Vec<usize> = (0..count)
         .filter(|&i| flags[i] & PF_TIGHT_IS_SATURATED == 0)
         .collect();
-    for i in 0..count {
-        nodes[i].tight_sphere = nodes[i].saturated_sphere;
+    for n in nodes.iter_mut() {
+        n.tight_sphere = n.saturated_sphere;
     }
     for k in 0..4 {
         for (&i, v) in own_tight.iter().zip(c.f32_planes(own_tight.len())?) {
@@ -525,8 +525,8 @@ pub fn decode_page(
     for k in 0..3 {
         let lo = c.take(count)?.to_vec();
         let hi = c.take(count)?;
-        for i in 0..count {
-            cones[i][k] = lo[i] as u16 | (hi[i] as u16) << 8;
+        for ((cone, l), h) in cones.iter_mut().zip(lo).zip(hi) {
+            cone[k] = l as u16 | (*h as u16) << 8;
         }
     }
     for (n, code) in nodes.iter_mut().zip(cones) {
@@ -621,16 +621,23 @@ mod tests {
             patch_crc32: i.wrapping_mul(0x01000193),
             vertex_count: i % 5000,
             triangle_count: i % 9000,
-            children: if i % 3 == 0 {
+            children: if i.is_multiple_of(3) {
                 [NO_NODE, NO_NODE]
             } else {
-                [2 * i + 1, if i % 5 == 0 { NO_NODE } else { 2 * i + 2 }]
+                [
+                    2 * i + 1,
+                    if i.is_multiple_of(5) {
+                        NO_NODE
+                    } else {
+                        2 * i + 2
+                    },
+                ]
             },
             parent: if i < 6 { NO_NODE } else { (i - 6) / 2 },
             diamond: i / 3,
             level: (i / 100) as u8,
             root: (i % 6) as u8,
-            flags: (i % 3 == 0) as u8,
+            flags: i.is_multiple_of(3) as u8,
             error: (i / 3) as f32 * 0.5,
             tight_sphere: [f, -f, 0.25 * f, 1.0 + f],
             saturated_sphere: [(i / 3) as f32, 1.0, 2.0, 1e3 + (i / 3) as f32],

@@ -22,7 +22,7 @@
 use std::borrow::Cow;
 use std::ops::Range;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Condvar, Mutex};
+use std::sync::{Arc, Condvar, Mutex, RwLock};
 use std::time::Duration;
 
 use tessera_format::{ByteSource, FormatError, ModelIndex, PatchData, PatchReader};
@@ -316,31 +316,64 @@ impl ByteSource for HttpSource {
     }
 }
 
-/// A model on an HTTP server: its index (read with one or two requests) and patches
-/// fetched on demand. See the crate docs.
+/// A model on an HTTP server: its index (read with one or two requests, or its top
+/// first and the rest as the view needs it) and patches fetched on demand. See the crate
+/// docs.
 #[derive(Debug)]
 pub struct RemoteModel {
     source: HttpSource,
     index: ModelIndex,
+    /// The index read so far (a paged open grows it; else the same as `index`).
+    latest: RwLock<Arc<ModelIndex>>,
+    /// Held while the index grows (one reader at a time).
+    growing: Mutex<()>,
     patches_read: AtomicU64,
 }
 
+/// Index pages a paged open reads first (the builder's pages hold 512 nodes: the roots
+/// and five or six levels under them).
+pub const TOP_PAGES: u64 = 1;
+
 impl RemoteModel {
-    /// Opens the model at `url` and reads and validates its index.
+    /// Opens the model at `url` and reads and validates its whole index.
     pub fn open(url: &str) -> Result<RemoteModel, FormatError> {
         let source = HttpSource::open(url)?;
         let index = ModelIndex::read(&source)?;
+        Ok(Self::with_index(source, index, url))
+    }
+
+    /// Opens the model at `url` reading only the top of its paged index
+    /// ([`TOP_PAGES`] pages); [`PatchReader::grow_index`] reads more, as the view needs
+    /// it.
+    pub fn open_paged(url: &str) -> Result<RemoteModel, FormatError> {
+        let source = HttpSource::open(url)?;
+        let index = ModelIndex::read_top(&source, TOP_PAGES)?;
+        Ok(Self::with_index(source, index, url))
+    }
+
+    fn with_index(source: HttpSource, index: ModelIndex, url: &str) -> RemoteModel {
         tracing::debug!(
             url,
             nodes = index.nodes().len(),
+            of = index.header().node_count,
             bytes = source.bytes_fetched(),
             "opened remote model"
         );
-        Ok(RemoteModel {
+        RemoteModel {
             source,
+            latest: RwLock::new(Arc::new(index.clone())),
             index,
+            growing: Mutex::new(()),
             patches_read: AtomicU64::new(0),
-        })
+        }
+    }
+
+    /// The index read so far.
+    fn current(&self) -> Arc<ModelIndex> {
+        self.latest
+            .read()
+            .unwrap_or_else(|e| e.into_inner())
+            .clone()
     }
 
     /// The byte source (for its counters).
@@ -359,25 +392,61 @@ impl PatchReader for RemoteModel {
     fn index(&self) -> &ModelIndex {
         &self.index
     }
+    fn transfer(&self) -> Option<(u64, u64)> {
+        Some((self.source.bytes_fetched(), self.source.requests()))
+    }
+    fn latest_index(&self) -> Option<Arc<ModelIndex>> {
+        let cur = self.current();
+        (cur.nodes().len() > self.index.nodes().len()).then_some(cur)
+    }
+    /// Reads index pages until at least one more level shows (doubling the pages read
+    /// each time: levels roughly double in size); a failed read leaves the index as it
+    /// was, to be grown again later.
+    fn grow_index(&self) -> bool {
+        let _one = self.growing.lock().unwrap_or_else(|e| e.into_inner());
+        let mut next = self.current();
+        let shown = next.nodes().len();
+        while next.nodes().len() == shown && !next.is_complete() {
+            match next.grown(&self.source, 2 * next.loaded_pages()) {
+                Ok(ix) => next = Arc::new(ix),
+                Err(e) => {
+                    tracing::warn!(url = self.source.url(), error = %e, "could not read more of the index");
+                    return false;
+                }
+            }
+        }
+        let grew = next.nodes().len() > shown;
+        if grew {
+            tracing::debug!(
+                nodes = next.nodes().len(),
+                bytes = self.source.bytes_fetched(),
+                "index grown"
+            );
+            *self.latest.write().unwrap_or_else(|e| e.into_inner()) = next;
+        }
+        grew
+    }
     fn decode_patch(&self, i: usize) -> Result<PatchData, FormatError> {
-        let range = self.index.patch_range(i)?;
+        let index = self.current();
+        let range = index.patch_range(i)?;
         if !self.source.in_prefix(&range) {
             self.patches_read.fetch_add(1, Ordering::Relaxed);
         }
         let bytes = self.source.read(range)?;
-        self.index.decode_patch(i, &bytes)
+        index.decode_patch(i, &bytes)
     }
 
     /// Groups `nodes` into runs of patches adjacent in the file (see the crate docs) and
     /// fetches each run with one range request; a failed request fails every node of
     /// its run, with the same message.
     fn decode_patches(&self, nodes: &[usize]) -> Vec<Result<PatchData, FormatError>> {
+        let index = self.current();
         let mut out: Vec<Option<Result<PatchData, FormatError>>> =
             nodes.iter().map(|_| None).collect();
         // (range, position in `nodes`), in file order; bad indices answered at once.
         let mut ranges = Vec::with_capacity(nodes.len());
         for (k, &i) in nodes.iter().enumerate() {
-            match self.index.patch_range(i) {
+            match index.patch_range(i) {
                 Ok(r) => ranges.push((r, k)),
                 Err(e) => out[k] = Some(Err(e)),
             }
@@ -406,7 +475,7 @@ impl PatchReader for RemoteModel {
                     for (r, k) in run {
                         let b =
                             &bytes[(r.start - span_start) as usize..(r.end - span_start) as usize];
-                        out[*k] = Some(self.index.decode_patch(nodes[*k], b));
+                        out[*k] = Some(index.decode_patch(nodes[*k], b));
                     }
                 }
                 Err(e) => {

@@ -95,7 +95,8 @@ impl State {
                 break q.node;
             }
         };
-        let index = model.index();
+        let latest = model.latest_index();
+        let index = latest.as_deref().unwrap_or(model.index());
         let bytes = |n: u32| {
             index
                 .patch_range(n as usize)

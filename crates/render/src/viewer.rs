@@ -8,6 +8,7 @@
 //! The three modes are `tessera_stream::Mode`'s: progressive (never waits), complete
 //! (the whole cut, in several passes if it exceeds the cache) and full resolution.
 
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -77,6 +78,8 @@ pub struct Viewer {
     opts: ViewerOptions,
     quant_step: f64,
     start: Instant,
+    /// A thread reading more of a paged index is running.
+    growing: Arc<AtomicBool>,
 }
 
 impl Viewer {
@@ -129,6 +132,7 @@ impl Viewer {
             opts,
             quant_step,
             start: Instant::now(),
+            growing: Arc::new(AtomicBool::new(false)),
         };
         let mut store = GpuStore {
             cache: &mut v.cache,
@@ -185,12 +189,26 @@ impl Viewer {
             queue: &gpu.queue,
             quant_step: self.quant_step,
         };
+        // A paged index read further since the last frame: select over more of it.
+        if let Some(ix) = self.model.latest_index() {
+            if ix.nodes().len() > self.scheduler.node_count() {
+                self.scheduler.set_index(&ix, &mut store);
+            }
+        }
         let mut stats = match self.opts.mode {
             Mode::Progressive => {
                 let time_s = self.start.elapsed().as_secs_f64();
                 let stats = self
                     .scheduler
                     .frame(camera, time_s, &mut self.pager, &mut store);
+                if stats.index_wants > 0 && !self.growing.swap(true, Ordering::AcqRel) {
+                    // Read more of the index off this thread; the frame never waits.
+                    let (model, growing) = (self.model.clone(), self.growing.clone());
+                    std::thread::spawn(move || {
+                        model.grow_index();
+                        growing.store(false, Ordering::Release);
+                    });
+                }
                 submit_pass(
                     gpu,
                     renderer,

@@ -35,8 +35,8 @@ pub use extract::{extract_nodes, write_cut_ply, Extracted};
 pub use merge::{merge_patches, CutMesh, PatchRef};
 pub use path::{CameraPath, PathError, PATH_FIELDS};
 pub use residency::{
-    predict_camera, prefetch_set, select_resident, should_unload, HotNode, NodeView,
-    PrefetchOptions, Selection,
+    predict_camera, prefetch_set, select_resident, should_unload, wants_refinement, HotNode,
+    NodeView, PrefetchOptions, Selection,
 };
 pub use select::{
     closest_distance, is_backfacing, is_leaf, needs_refinement, select_cut, select_cut_into,

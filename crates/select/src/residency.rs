@@ -231,6 +231,14 @@ fn refines(view: &ViewParams, n: &HotNode, growth: f32) -> bool {
     )
 }
 
+/// Whether the view (with spheres grown by `growth`) would refine node `index`: its
+/// projected saturated error exceeds the tolerance. False for an index out of range.
+pub fn wants_refinement(nv: &NodeView, index: u32, view: &ViewParams, growth: f32) -> bool {
+    nv.nodes
+        .get(index as usize)
+        .is_some_and(|n| refines(view, n, growth))
+}
+
 /// Pixels of error the parent (`parent_error`) shows over the region of `child`: the
 /// parent's error projected at the closest point of the child's (grown) saturated sphere.
 /// The child's own error is not used because it is 0 for leaves; this is at most the

@@ -29,4 +29,4 @@ pub use scheduler::{
     SchedulerOptions, MAX_UPLOAD_ROUNDS, PREFETCH_GROWTH, UNLOAD_GROWTH,
 };
 pub use source::{Answer, PatchSource};
-pub use store::{ResidentStore, StoreError};
+pub use store::{CountingStore, ResidentStore, StoreError};

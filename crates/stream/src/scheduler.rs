@@ -27,8 +27,8 @@ use rustc_hash::{FxHashMap, FxHashSet};
 use serde::Serialize;
 use tessera_format::{ModelIndex, PatchData, NO_NODE};
 use tessera_select::{
-    predict_camera, prefetch_set, select_resident, should_unload, Camera, NodeView,
-    PrefetchOptions, Selection, ViewParams,
+    predict_camera, prefetch_set, select_resident, should_unload, wants_refinement, Camera,
+    NodeView, PrefetchOptions, Selection, ViewParams,
 };
 
 use crate::groups::{Groups, Readiness};
@@ -152,6 +152,10 @@ pub struct FrameStats {
     /// Patches evicted from the store so far.
     pub gpu_evictions: u64,
     pub ram_resident_bytes: u64,
+    /// Drawn nodes the view would refine whose children lie beyond the part of a paged
+    /// index read so far: the front end should read more of the index
+    /// ([`Scheduler::set_index`] then takes it).
+    pub index_wants: usize,
 }
 
 /// Why a complete frame could not be drawn.
@@ -177,6 +181,9 @@ pub struct Scheduler {
     nv: NodeView,
     groups: Groups,
     facts: Vec<NodeFacts>,
+    /// Nodes with a child beyond the part of the index shown (a paged index read in
+    /// part); empty for a whole index.
+    cut_off: FxHashSet<u32>,
     opts: SchedulerOptions,
     /// Frames started: the one recency counter of both caches.
     frame: u64,
@@ -316,16 +323,7 @@ impl Residency {
 impl Scheduler {
     /// A scheduler for the model `index` describes; nothing is resident yet.
     pub fn new(index: &ModelIndex, opts: SchedulerOptions) -> Scheduler {
-        let nv = NodeView::new(index.header(), index.nodes());
-        let groups = Groups::new(&nv, index.nodes());
-        let facts = index
-            .nodes()
-            .iter()
-            .map(|n| NodeFacts {
-                triangles: n.triangle_count,
-                level: n.level,
-            })
-            .collect();
+        let (nv, groups, facts, cut_off) = Self::tables(index);
         let g = groups.len();
         let n = nv.len();
         Scheduler {
@@ -341,6 +339,7 @@ impl Scheduler {
             nv,
             groups,
             facts,
+            cut_off,
             opts,
             frame: 0,
             epoch: 0,
@@ -354,6 +353,70 @@ impl Scheduler {
             prev_camera: None,
             answers: Vec::new(),
         }
+    }
+
+    /// The read-only tables of `index`.
+    fn tables(index: &ModelIndex) -> (NodeView, Groups, Vec<NodeFacts>, FxHashSet<u32>) {
+        let nv = NodeView::new(index.header(), index.nodes());
+        let groups = Groups::new(&nv, index.nodes());
+        let facts = index
+            .nodes()
+            .iter()
+            .map(|n| NodeFacts {
+                triangles: n.triangle_count,
+                level: n.level,
+            })
+            .collect();
+        let shown = index.nodes().len() as u64;
+        let total = index.header().node_count;
+        let cut_off = (0..index.nodes().len() as u32)
+            .filter(|&i| {
+                index.nodes()[i as usize]
+                    .children
+                    .iter()
+                    .any(|&c| c != NO_NODE && (c as u64) >= shown && (c as u64) < total)
+            })
+            .collect();
+        (nv, groups, facts, cut_off)
+    }
+
+    /// Takes a larger part of the same model's paged index (read further since this
+    /// scheduler was made): the nodes it adds become selectable; everything resident stays
+    /// resident. Node and group ids of the part already shown do not change (the index
+    /// shows whole levels and groups are numbered in node order); should they anyway (an
+    /// index of another model), the store is emptied first.
+    pub fn set_index<R: ResidentStore + ?Sized>(&mut self, index: &ModelIndex, store: &mut R) {
+        let (nv, groups, facts, cut_off) = Self::tables(index);
+        let (old_n, old_g) = (self.nv.len(), self.groups.len());
+        let stable = nv.len() >= old_n
+            && groups.len() >= old_g
+            && (0..old_n as u32).all(|i| groups.of(i) == self.groups.of(i))
+            && (0..old_g as u32).all(|g| groups.members(g) == self.groups.members(g));
+        if !stable {
+            tracing::warn!("the new index does not extend the old one: emptying the store");
+            for g in 0..old_g as u32 {
+                self.res.evict_group(&self.groups, store, g);
+            }
+            self.ram = Lru::new(self.opts.ram_budget_bytes);
+        }
+        let (n, g) = (nv.len(), groups.len());
+        self.nv = nv;
+        self.groups = groups;
+        self.facts = facts;
+        self.cut_off = cut_off;
+        self.readiness = Readiness::new(g);
+        self.visit = vec![0; g];
+        self.res.resident.resize(n, false);
+        self.res.members.resize(g, 0);
+        if !stable {
+            self.res.resident.iter_mut().for_each(|r| *r = false);
+            self.res.members.iter_mut().for_each(|m| *m = 0);
+        }
+    }
+
+    /// Nodes the index shows.
+    pub fn node_count(&self) -> usize {
+        self.nv.len()
     }
 
     /// The options.
@@ -593,6 +656,17 @@ impl Scheduler {
         self.select_resident_now(&view);
         let draw_before: FxHashSet<u32> = self.sel.draw.iter().copied().collect();
         stats.cache_misses = self.sel.missing.len();
+        if !self.cut_off.is_empty() {
+            stats.index_wants = self
+                .sel
+                .draw
+                .iter()
+                .filter(|&&n| {
+                    self.cut_off.contains(&n)
+                        && wants_refinement(&self.nv, n, &view, PREFETCH_GROWTH)
+                })
+                .count();
+        }
         if self.opts.prefetch {
             let predicted = self.prev_camera.as_ref().map(|(prev, t)| {
                 let dt = (time_s - t).max(0.0);

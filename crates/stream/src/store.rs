@@ -31,3 +31,43 @@ pub trait ResidentStore {
     /// memory is released). Default: nothing.
     fn flush(&mut self) {}
 }
+
+/// A store that holds nothing but counts: bytes as a GPU store would take them
+/// (24 bytes a vertex, 4 an index). For running the scheduler without a device:
+/// policy tests, the WebAssembly probe, benchmarks of the streaming core.
+#[derive(Debug, Default)]
+pub struct CountingStore {
+    bytes: u64,
+    held: rustc_hash::FxHashMap<u32, u64>,
+}
+
+impl CountingStore {
+    /// Nodes held.
+    pub fn len(&self) -> usize {
+        self.held.len()
+    }
+    /// Whether nothing is held.
+    pub fn is_empty(&self) -> bool {
+        self.held.is_empty()
+    }
+}
+
+impl ResidentStore for CountingStore {
+    fn bytes_for(&self, p: &PatchData) -> u64 {
+        p.positions.len() as u64 * 24 + p.indices.len() as u64 * 4
+    }
+    fn upload(&mut self, node: u32, p: &PatchData) -> Result<u64, StoreError> {
+        let b = self.bytes_for(p);
+        if let Some(old) = self.held.insert(node, b) {
+            self.bytes -= old;
+        }
+        self.bytes += b;
+        Ok(b)
+    }
+    fn evict(&mut self, node: u32) {
+        self.bytes -= self.held.remove(&node).unwrap_or(0);
+    }
+    fn resident_bytes(&self) -> u64 {
+        self.bytes
+    }
+}

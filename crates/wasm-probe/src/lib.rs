@@ -10,7 +10,7 @@ use std::sync::Arc;
 
 use tessera_format::{ModelIndex, PatchData};
 use tessera_select::{Camera, Orbit};
-use tessera_stream::{Answer, PatchSource, ResidentStore, Scheduler, SchedulerOptions, StoreError};
+use tessera_stream::{Answer, CountingStore, PatchSource, Scheduler, SchedulerOptions};
 
 /// Answers every request at the next poll, decoding from the bytes in memory.
 struct SliceSource<'a> {
@@ -33,31 +33,6 @@ impl PatchSource for SliceSource<'_> {
     }
     fn pending(&self) -> usize {
         self.wanted.len()
-    }
-}
-
-/// Counts bytes, holds nothing.
-#[derive(Default)]
-struct CountingStore {
-    bytes: u64,
-    held: rustc_hash::FxHashMap<u32, u64>,
-}
-
-impl ResidentStore for CountingStore {
-    fn bytes_for(&self, p: &PatchData) -> u64 {
-        p.positions.len() as u64 * 24 + p.indices.len() as u64 * 4
-    }
-    fn upload(&mut self, node: u32, p: &PatchData) -> Result<u64, StoreError> {
-        let b = self.bytes_for(p);
-        self.bytes += b;
-        self.held.insert(node, b);
-        Ok(b)
-    }
-    fn evict(&mut self, node: u32) {
-        self.bytes -= self.held.remove(&node).unwrap_or(0);
-    }
-    fn resident_bytes(&self) -> u64 {
-        self.bytes
     }
 }
 

@@ -13,6 +13,17 @@ use tessera_serve::{ServeOptions, Server};
 
 /// Builds a sphere model of `triangles` into `dir/name`.
 pub fn build(dir: &Path, name: &str, triangles: u64, seed: u64) -> PathBuf {
+    build_paged(
+        dir,
+        name,
+        triangles,
+        seed,
+        tessera_format::DEFAULT_PAGE_NODES,
+    )
+}
+
+/// As [`build`], with `page_nodes` nodes per index page.
+pub fn build_paged(dir: &Path, name: &str, triangles: u64, seed: u64, page_nodes: u32) -> PathBuf {
     let ply = dir.join(format!("{name}.ply"));
     let tsr = dir.join(name);
     let opts = tessera_gen::SphereOptions {
@@ -25,6 +36,7 @@ pub fn build(dir: &Path, name: &str, triangles: u64, seed: u64) -> PathBuf {
         leaf_triangles: 400,
         node_triangles: 200,
         threads: Some(2),
+        index_page_nodes: page_nodes,
         ..Default::default()
     };
     tessera_build::build(&ply, &tsr, &b, &tessera_build::NoProgress).unwrap();
