@@ -674,6 +674,28 @@ fn check_header(h: &Header) -> Result<(), FormatError> {
     {
         return Err(invalid_header("bounding cube is not finite and positive"));
     }
+    // Model-space coordinates a reader can compute with: origin + q * step in f64, and
+    // the camera's f32 frame around the model.
+    const MAX_COORD: f64 = 1e15;
+    if h.cube_size > MAX_COORD || h.cube_origin.iter().any(|v| v.abs() > MAX_COORD) {
+        return Err(invalid_header(format!(
+            "bounding cube at {:?} of size {} is beyond +-{MAX_COORD:e}",
+            h.cube_origin, h.cube_size
+        )));
+    }
+    // The model's bounding sphere holds points of the cube: its centre lies in the cube
+    // (with a margin of one cube) and its radius is at most the cube's diagonal.
+    let [cx, cy, cz, r] = h.bounding_sphere;
+    let centre_ok = [cx, cy, cz]
+        .iter()
+        .zip(h.cube_origin)
+        .all(|(&c, o)| c.is_finite() && c >= o - h.cube_size && c <= o + 2.0 * h.cube_size);
+    if !centre_ok || !(r.is_finite() && r >= 0.0 && r <= 2.0 * h.cube_size) {
+        return Err(invalid_header(format!(
+            "bounding sphere {:?} does not fit the bounding cube at {:?} of size {}",
+            h.bounding_sphere, h.cube_origin, h.cube_size
+        )));
+    }
     Ok(())
 }
 

@@ -384,3 +384,49 @@ fn documented_offsets() {
     assert_eq!(offset_of!(NodeRecord, quant_min), 104);
     assert_eq!(offset_of!(NodeRecord, reserved), 116);
 }
+
+/// Issue 14, failure 1: a header with a valid CRC but a bounding sphere that is not
+/// finite or does not fit the cube (radius inf or 1e300, centre NaN or 1e39) made
+/// `render` panic or draw blank frames; such a header is now refused at open.
+#[test]
+fn header_with_a_bad_bounding_sphere_is_refused() {
+    let f = Fixture::new();
+    let good = f.bytes();
+    let h: Header = bytemuck::pod_read_unaligned(&good[..256]);
+    let mut bad_spheres = Vec::new();
+    for r in [f64::INFINITY, 1e300, f64::NAN, -1.0, 1e39] {
+        bad_spheres.push([
+            h.bounding_sphere[0],
+            h.bounding_sphere[1],
+            h.bounding_sphere[2],
+            r,
+        ]);
+    }
+    for c in [f64::NAN, 1e39, -1e39, f64::INFINITY] {
+        bad_spheres.push([
+            c,
+            h.bounding_sphere[1],
+            h.bounding_sphere[2],
+            h.bounding_sphere[3],
+        ]);
+    }
+    for sphere in bad_spheres {
+        let mut hh = h;
+        hh.bounding_sphere = sphere;
+        hh.header_crc32 = header_crc32(&hh);
+        let mut b = good.clone();
+        b[..256].copy_from_slice(bytemuck::bytes_of(&hh));
+        let e = f.open_bytes("sphere", &b).unwrap_err();
+        assert!(e.to_string().contains("bounding sphere"), "{sphere:?}: {e}");
+    }
+    for origin in [1e300, -1e16] {
+        let mut hh = h;
+        hh.cube_origin[1] = origin;
+        hh.bounding_sphere[1] = origin;
+        hh.header_crc32 = header_crc32(&hh);
+        let mut b = good.clone();
+        b[..256].copy_from_slice(bytemuck::bytes_of(&hh));
+        let e = f.open_bytes("origin", &b).unwrap_err();
+        assert!(e.to_string().contains("bounding cube"), "{origin}: {e}");
+    }
+}
