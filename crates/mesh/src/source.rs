@@ -31,6 +31,9 @@ impl From<std::io::Error> for ReadErr {
 }
 
 /// A refillable window over a reader.
+/// The UTF-8 byte order mark.
+const UTF8_BOM: [u8; 3] = [0xEF, 0xBB, 0xBF];
+
 pub(crate) struct Source<R> {
     inner: R,
     buf: Vec<u8>,
@@ -126,6 +129,11 @@ impl<R: Read> Source<R> {
     /// `false` at end of file with nothing read.
     pub(crate) fn line_into(&mut self, out: &mut Vec<u8>, max: usize) -> Result<bool, ReadErr> {
         out.clear();
+        // A UTF-8 byte order mark before the first line (editors on Windows write one)
+        // is not part of the text: skipping it keeps the first statement.
+        if self.base == 0 && self.pos == 0 && self.ensure(3)? && self.buf[..3] == UTF8_BOM {
+            self.pos = 3;
+        }
         loop {
             if !self.ensure(1)? {
                 if out.last() == Some(&b'\r') {

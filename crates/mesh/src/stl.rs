@@ -65,8 +65,10 @@ pub(crate) fn read_stl(
     finish_report(path, welder.report)
 }
 
-/// `solid` followed by text (binary files sometimes start with `solid` too).
+/// `solid` followed by text (binary files sometimes start with `solid` too), after a
+/// UTF-8 byte order mark if there is one.
 fn looks_like_ascii(head: &[u8]) -> bool {
+    let head = head.strip_prefix(&[0xEF, 0xBB, 0xBF]).unwrap_or(head);
     head.trim_ascii_start().starts_with(b"solid")
         && head
             .iter()

@@ -207,3 +207,29 @@ fn real_bunny_obj() {
 fn real_nefertiti_obj() {
     check_real("nefertiti.obj", 99_938);
 }
+
+/// Issue 14, failure 6: an OBJ starting with a UTF-8 byte order mark lost its first `v`
+/// line and shifted every face by one vertex. Text formats skip the mark.
+#[test]
+fn utf8_bom_before_the_first_line_is_skipped() {
+    let text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 2 4\n";
+    let (plain_r, plain) = read_ok("plain.obj", text.as_bytes());
+    let mut bom = vec![0xEF, 0xBB, 0xBF];
+    bom.extend_from_slice(text.as_bytes());
+    let (r, c) = read_ok("bom.obj", &bom);
+    assert_eq!(r.vertices, 4);
+    assert_eq!(r.vertices, plain_r.vertices);
+    assert_eq!(c.triangles, plain.triangles);
+    assert_eq!(pos(&c), pos(&plain));
+    // A PLY header and an ASCII STL too.
+    let ply = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n";
+    let mut b = vec![0xEF, 0xBB, 0xBF];
+    b.extend_from_slice(ply.as_bytes());
+    let (r, _) = read_ok("bom.ply", &b);
+    assert_eq!((r.vertices, r.triangles), (3, 1));
+    let stl = "solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\nendloop\nendfacet\nendsolid x\n";
+    let mut b = vec![0xEF, 0xBB, 0xBF];
+    b.extend_from_slice(stl.as_bytes());
+    let (r, _) = read_ok("bom.stl", &b);
+    assert_eq!(r.triangles, 1);
+}
