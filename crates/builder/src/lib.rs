@@ -107,6 +107,50 @@ impl BuildError {
     }
 }
 
+/// Refuses, before any work, an output that is the input itself (the same file, also
+/// through links: the rename at the end would replace the input with the model) or a
+/// directory, or whose directory does not exist.
+fn check_output(input: &Path, output: &Path) -> Result<(), BuildError> {
+    let same = |a: &std::fs::Metadata, b: &std::fs::Metadata| {
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::MetadataExt;
+            a.dev() == b.dev() && a.ino() == b.ino()
+        }
+        #[cfg(not(unix))]
+        {
+            let _ = (a, b);
+            false
+        }
+    };
+    if let (Ok(i), Ok(o)) = (std::fs::metadata(input), std::fs::metadata(output)) {
+        if same(&i, &o) || std::fs::canonicalize(input).ok() == std::fs::canonicalize(output).ok() {
+            return Err(BuildError::Options(format!(
+                "the output {} is the input: building would replace it; choose another output path",
+                output.display()
+            )));
+        }
+        if o.is_dir() {
+            return Err(BuildError::Options(format!(
+                "the output {} is a directory; give a file path such as {}",
+                output.display(),
+                output.join("model.tsr").display()
+            )));
+        }
+    }
+    let dir = match output.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    if !dir.is_dir() {
+        return Err(BuildError::Options(format!(
+            "the output's directory {} does not exist",
+            dir.display()
+        )));
+    }
+    Ok(())
+}
+
 /// What a build did, for `--json` and the benchmark.
 #[derive(Clone, Debug, Default)]
 pub struct BuildReport {
@@ -197,6 +241,7 @@ pub fn build(
             "need leaf_triangles >= 16 and 8 <= node_triangles <= leaf_triangles".into(),
         ));
     }
+    check_output(input, output)?;
     let pool = {
         let mut b = rayon::ThreadPoolBuilder::new();
         if let Some(n) = opts.threads {
