@@ -151,7 +151,8 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         "peak_rss_bytes": peak_rss,
         "setup_ms": setup_ms,
     });
-    if let (Some((b0, r0)), Some((b, r))) = (at_first_frame, model.transfer()) {
+    let transfer = at_first_frame.zip(model.transfer());
+    if let Some(((b0, r0), (b, r))) = transfer {
         summary["remote"] = json!({
             "first_frame_bytes": b0,
             "first_frame_requests": r0,
@@ -183,7 +184,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         summary["mean_selection_ms"].as_f64().unwrap_or(0.0),
         peak_rss >> 20,
     );
-    if let (Some((b0, r0)), Some((b, r))) = (at_first_frame, model.transfer()) {
+    if let Some(((b0, r0), (b, r))) = transfer {
         println!(
             "remote: {b0} bytes in {r0} requests before the first frame, {b} bytes in {r} requests in all"
         );

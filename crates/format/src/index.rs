@@ -209,12 +209,15 @@ pub(crate) fn parse_block_table(header: &Header, bytes: &[u8]) -> Result<Vec<u32
 }
 
 /// Checks directory block `b` against its CRC and returns its entries, each checked to
-/// lie inside the pages section; entries within the block must follow each other.
+/// lie inside the pages section; the first must start at `start` (where the previous
+/// block's last page ends, or the first page's offset), each next where the previous
+/// ends.
 pub(crate) fn parse_directory_block(
     header: &Header,
     b: u64,
     bytes: &[u8],
     crc: u32,
+    start: u64,
 ) -> Result<Vec<PageEntry>, FormatError> {
     let layout = header.index_layout();
     let range = layout.block_range(b);
@@ -235,8 +238,18 @@ pub(crate) fn parse_directory_block(
         .map(bytemuck::pod_read_unaligned)
         .collect();
     let first_page = b * DIRECTORY_BLOCK_PAGES;
+    let mut expected = start;
     for (k, e) in entries.iter().enumerate() {
         let page = first_page + k as u64;
+        if e.offset != expected {
+            return Err(FormatError::CorruptIndexPage {
+                page,
+                detail: format!(
+                    "starts at {}, the previous part ends at {expected}",
+                    e.offset
+                ),
+            });
+        }
         let end = e.offset.checked_add(e.bytes as u64);
         if e.offset < layout.pages_offset || end.is_none_or(|end| end > header.patch_data_offset) {
             return Err(FormatError::CorruptIndexPage {
@@ -247,12 +260,7 @@ pub(crate) fn parse_directory_block(
                 ),
             });
         }
-        if k > 0 && entries[k - 1].offset + entries[k - 1].bytes as u64 != e.offset {
-            return Err(FormatError::CorruptIndexPage {
-                page,
-                detail: "does not start where the previous page ends".into(),
-            });
-        }
+        expected = e.offset + e.bytes as u64;
     }
     Ok(entries)
 }
@@ -365,9 +373,7 @@ impl ModelIndex {
 
     /// Reads the header and the paged index from `source` (two reads) and validates them.
     pub fn read<S: ByteSource + ?Sized>(source: &S) -> Result<ModelIndex, FormatError> {
-        let total = source.len();
-        let prefix = source.read(0..HEADER_BYTES.min(total))?;
-        let header = Self::parse_header(&prefix, total)?;
+        let header = Self::read_header(source)?;
         let index = source.read(header.index_offset..header.patch_data_offset)?;
         Self::from_parts(header, &index)
     }
@@ -380,9 +386,7 @@ impl ModelIndex {
         source: &S,
         pages: u64,
     ) -> Result<ModelIndex, FormatError> {
-        let total = source.len();
-        let prefix = source.read(0..HEADER_BYTES.min(total))?;
-        let header = Self::parse_header(&prefix, total)?;
+        let header = Self::read_header(source)?;
         let mut index = Self::start(header, source)?.grown(source, pages.max(1))?;
         // Pages smaller than the root level: read on until the roots are shown.
         while index.visible < header.root_count as usize && !index.is_complete() {
@@ -390,6 +394,13 @@ impl ModelIndex {
             index = index.grown(source, more)?;
         }
         Ok(index)
+    }
+
+    /// Reads and checks the header of `source`.
+    fn read_header<S: ByteSource + ?Sized>(source: &S) -> Result<Header, FormatError> {
+        let total = source.len();
+        let prefix = source.read(0..HEADER_BYTES.min(total))?;
+        Self::parse_header(&prefix, total)
     }
 
     /// An index with no pages read yet: header and block table.
@@ -460,20 +471,11 @@ impl ModelIndex {
             for b in have_blocks..need_blocks {
                 let r = layout.block_range(b);
                 let slice = &bytes[(r.start - start) as usize..(r.end - start) as usize];
-                let entries = parse_directory_block(&h, b, slice, next.blocks[b as usize])?;
-                let expected = next
+                let after = next
                     .entries
                     .last()
                     .map_or(layout.pages_offset, |e| e.offset + e.bytes as u64);
-                if entries.first().is_some_and(|e| e.offset != expected) {
-                    return Err(FormatError::CorruptIndexPage {
-                        page: b * DIRECTORY_BLOCK_PAGES,
-                        detail: format!(
-                            "starts at {}, the previous part ends at {expected}",
-                            entries[0].offset
-                        ),
-                    });
-                }
+                let entries = parse_directory_block(&h, b, slice, next.blocks[b as usize], after)?;
                 next.entries.extend(entries);
             }
         }
@@ -690,7 +692,7 @@ fn check_header(h: &Header) -> Result<(), FormatError> {
         .iter()
         .zip(h.cube_origin)
         .all(|(&c, o)| c.is_finite() && c >= o - h.cube_size && c <= o + 2.0 * h.cube_size);
-    if !centre_ok || !(r.is_finite() && r >= 0.0 && r <= 2.0 * h.cube_size) {
+    if !(centre_ok && r.is_finite() && (0.0..=2.0 * h.cube_size).contains(&r)) {
         return Err(invalid_header(format!(
             "bounding sphere {:?} does not fit the bounding cube at {:?} of size {}",
             h.bounding_sphere, h.cube_origin, h.cube_size

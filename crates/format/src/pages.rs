@@ -21,7 +21,7 @@
 //! Written by hand because the layout is Tessera's own; zstd does the entropy coding.
 
 use bytemuck::{Pod, Zeroable};
-use rustc_hash::FxHashMap;
+use rustc_hash::{FxHashMap, FxHashSet};
 
 use crate::error::FormatError;
 use crate::records::{NodeRecord, NODE_FLAG_LEAF, NO_NODE};
@@ -234,14 +234,14 @@ fn put_f32_planes(out: &mut Vec<u8>, values: &[f32]) {
     }
 }
 
-/// Encodes the nodes of one page (`nodes`, whose records hold their final
-/// `patch_offset`s) as a zstd frame; `patch_base` is the offset of the first node's patch
-/// relative to the patch data. Panics only on caller bugs (zstd failing in memory).
+/// Encodes the nodes of one page as a zstd frame; `patch_base` is the offset of the
+/// first node's patch relative to the patch data (the nodes' `patch_offset`s are not
+/// read: the page's patches follow each other). Panics only on caller bugs (zstd failing in memory).
 pub fn encode_page(nodes: &[NodeRecord], patch_base: u64) -> Vec<u8> {
     let n = nodes.len();
     let mut out = Vec::with_capacity(8 + n * 64);
     out.extend_from_slice(&patch_base.to_le_bytes());
-    let mut seen: FxHashMap<u32, ()> = FxHashMap::default();
+    let mut seen: FxHashSet<u32> = FxHashSet::default();
     let mut flags = Vec::with_capacity(n);
     let mut diamond_nodes = Vec::new();
     for node in nodes {
@@ -255,7 +255,7 @@ pub fn encode_page(nodes: &[NodeRecord], patch_base: u64) -> Vec<u8> {
         if node.parent != NO_NODE {
             f |= PF_PARENT;
         }
-        if seen.insert(node.diamond, ()).is_none() {
+        if seen.insert(node.diamond) {
             f |= PF_DIAMOND_DATA;
             diamond_nodes.push(*node);
         }

@@ -178,9 +178,9 @@ fn read_exact_at(file: &File, mut buf: &mut [u8], mut offset: u64) -> std::io::R
 
 /// The complete header and the paged index (block table, directory, pages: the bytes
 /// from [`Header::index_offset`] to the patch data) of a model whose node records are
-/// `nodes`, with each `patch_offset` relative to the start of the patch data and the
-/// patches following each other in node order. The header is `header` with the fields
-/// [`write_model`] fills in set.
+/// `nodes`. Their `patch_offset`s are not read: the patches follow each other in node
+/// order from the start of the patch data, so the offsets follow from `patch_bytes`.
+/// The header is `header` with the fields [`write_model`] fills in set.
 pub fn encode_index(
     header: &Header,
     nodes: &[NodeRecord],
@@ -192,18 +192,16 @@ pub fn encode_index(
         header.page_nodes
     };
     let layout = IndexLayout::new(nodes.len() as u64, page_nodes, header_bytes);
+    // Patches follow each other in node order, so each page stores only the offset of
+    // its first patch relative to the patch data (known before the index's own size).
     let mut rel = 0u64;
-    for (i, n) in nodes.iter().enumerate() {
-        if n.patch_offset != rel {
-            return Err(FormatError::InvalidInput {
-                detail: format!("node {i}'s patch does not follow the previous node's"),
-            });
-        }
-        rel += n.patch_bytes as u64;
-    }
     let frames: Vec<Vec<u8>> = nodes
         .chunks(page_nodes as usize)
-        .map(|page| encode_page(page, page[0].patch_offset))
+        .map(|page| {
+            let base = rel;
+            rel += page.iter().map(|n| n.patch_bytes as u64).sum::<u64>();
+            encode_page(page, base)
+        })
         .collect();
     let mut directory = Vec::with_capacity(frames.len());
     let mut at = layout.pages_offset;
@@ -245,19 +243,13 @@ pub fn encode_index(
 }
 
 /// `model` (the bytes of a model file, header checked) with its node records replaced
-/// by `nodes` (absolute `patch_offset`s as [`crate::ModelIndex::nodes`] gives them; the
-/// patch bytes, counts and CRCs as given) and the index re-encoded: what a writer with a
+/// by `nodes` (as [`crate::ModelIndex::nodes`] gives them; the patch bytes, counts and
+/// CRCs as given, the offsets following from the patch bytes) and the index re-encoded: what a writer with a
 /// bug in its records would produce, for tests of the checks downstream.
 pub fn replace_index(model: &[u8], nodes: &[NodeRecord]) -> Result<Vec<u8>, FormatError> {
     let h = crate::ModelIndex::parse_header(model, model.len() as u64)?;
     let patches = &model[h.patch_data_offset as usize..];
-    let mut rel: Vec<NodeRecord> = nodes.to_vec();
-    let mut at = 0u64;
-    for n in &mut rel {
-        n.patch_offset = at;
-        at += n.patch_bytes as u64;
-    }
-    let (hh, index) = encode_index(&h, &rel)?;
+    let (hh, index) = encode_index(&h, nodes)?;
     let mut b = bytemuck::bytes_of(&hh).to_vec();
     b.extend_from_slice(&index);
     b.extend_from_slice(patches);
@@ -269,7 +261,8 @@ pub fn replace_index(model: &[u8], nodes: &[NodeRecord]) -> Result<Vec<u8>, Form
 /// `nodes[i]`'s patch is `patches[i]` in `spool`. Fills in the header's `magic`,
 /// `version`, `header_bytes`, `node_count`, the offsets, `page_count`, `page_nodes`
 /// (when 0: [`DEFAULT_PAGE_NODES`]), `patch_data_bytes`, `file_bytes`, both checksums
-/// and `reserved`, and each node's `patch_offset`, `patch_bytes` and `patch_crc32`;
+/// and `reserved`, and each node's `patch_bytes` and `patch_crc32` (its patch offset
+/// follows from them);
 /// everything else is written as given. The node records go into the paged index
 /// (`docs/format.md`).
 /// The file appears at `path` only once complete and synced; on error nothing is left
@@ -286,17 +279,10 @@ pub fn write_model(
             detail: format!("{} nodes but {} patches", nodes.len(), patches.len()),
         });
     }
-    // Patch offsets relative to the patch data: pages store them so, which lets the
-    // pages be encoded before their own total size (and so the patch data offset) is
-    // known.
     let mut table: Vec<NodeRecord> = nodes.to_vec();
-    let mut rel = 0u64;
     for (node, patch) in table.iter_mut().zip(patches) {
-        node.patch_offset = rel;
         node.patch_bytes = patch.bytes;
         node.patch_crc32 = patch.crc32;
-        node.reserved = [0; 3];
-        rel += patch.bytes as u64;
     }
     let (h, index) = encode_index(header, &table)?;
 

@@ -406,12 +406,9 @@ impl Scheduler {
         self.cut_off = cut_off;
         self.readiness = Readiness::new(g);
         self.visit = vec![0; g];
+        // (When not stable, evicting every group above cleared both.)
         self.res.resident.resize(n, false);
         self.res.members.resize(g, 0);
-        if !stable {
-            self.res.resident.iter_mut().for_each(|r| *r = false);
-            self.res.members.iter_mut().for_each(|m| *m = 0);
-        }
     }
 
     /// Nodes the index shows.
