@@ -85,6 +85,8 @@ pub struct PagerStats {
     pub loads: u64,
     /// Patches that failed to load.
     pub failures: u64,
+    /// Encoded bytes of the patches loaded (what was read from the file or network).
+    pub bytes_read: u64,
 }
 
 /// Loads patches of one model on background threads. See the crate docs.

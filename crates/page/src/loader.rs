@@ -198,8 +198,17 @@ pub(crate) fn run(shared: &Shared) {
         }
         let nodes: Vec<usize> = batch.iter().map(|&n| n as usize).collect();
         let results = shared.model.decode_patches(&nodes);
+        let index = shared.model.latest_index();
+        let index = index.as_deref().unwrap_or(shared.model.index());
         let mut st = shared.lock();
         for (&node, result) in batch.iter().zip(results) {
+            if result.is_ok() {
+                let bytes = index
+                    .nodes()
+                    .get(node as usize)
+                    .map_or(0, |r| r.patch_bytes);
+                st.stats.bytes_read += u64::from(bytes);
+            }
             publish(&mut st, node, result);
         }
         // A reader answering fewer results than asked: the rest fail, never hang.

@@ -55,8 +55,11 @@ impl Gpu {
             ..wgpu::Limits::downlevel_defaults()
         }
         .using_resolution(alimits.clone());
+        // Lines for the wireframe overlay, where the adapter has them.
+        let features = adapter.features() & wgpu::Features::POLYGON_MODE_LINE;
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("tessera device"),
+            required_features: features,
             required_limits: limits,
             ..Default::default()
         }))

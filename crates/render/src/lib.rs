@@ -13,7 +13,9 @@ mod viewer;
 
 pub use cache::{GpuCache, GpuCacheStats, GpuStore, GpuVertex, Slot};
 pub use gpu::Gpu;
-pub use renderer::{FrameParams, Renderer, PATCH_SHADER};
+pub use renderer::{
+    clip_planes, instance_tag, ColorMode, FrameParams, Light, Renderer, Shading, PATCH_SHADER,
+};
 pub use tessera_image::{diff_stats, enclosed_background_pixels, psnr, Image, ImageError};
 pub use viewer::{FrameStats, Mode, Viewer, ViewerOptions};
 

@@ -16,11 +16,15 @@ struct Frame {
     // has per-vertex colours, 0 to use the clay colour.
     sky_up_has_color: vec4<f32>,
     clay: vec4<f32>,
+    // x: colour mode (0 natural, 1 by node, 2 by level); y: 1 = unlit.
+    mode: vec4<f32>,
 }
 
 @group(0) @binding(0) var<uniform> frame: Frame;
 
 struct VertexIn {
+    // Level in the top 8 bits, node id in the low 24 (see `instance_tag`).
+    @builtin(instance_index) tag: u32,
     @location(0) position: vec3<f32>,
     @location(1) normal: vec4<f32>,
     @location(2) color: vec4<f32>,
@@ -37,8 +41,23 @@ fn vs_main(v: VertexIn) -> VertexOut {
     var out: VertexOut;
     out.clip = frame.view_proj * vec4<f32>(v.position, 1.0);
     out.normal = v.normal.xyz;
-    out.color = select(frame.clay.rgb, v.color.rgb, frame.sky_up_has_color.w > 0.5);
+    var color = select(frame.clay.rgb, v.color.rgb, frame.sky_up_has_color.w > 0.5);
+    if (frame.mode.x > 1.5) {
+        // By level: hue from blue (coarse) to red (fine), 24 levels a turn.
+        color = hue(0.66 - f32(v.tag >> 24u) / 24.0 * 0.66);
+    } else if (frame.mode.x > 0.5) {
+        // By node: a hashed hue per node, pastel so the shading still reads.
+        var h = v.tag * 2654435761u;
+        h = h ^ (h >> 15u);
+        color = mix(hue(f32(h & 1023u) / 1023.0), vec3<f32>(1.0), 0.25);
+    }
+    out.color = color;
     return out;
+}
+
+fn hue(h: f32) -> vec3<f32> {
+    let k = fract(vec3<f32>(h) + vec3<f32>(0.0, 2.0 / 3.0, 1.0 / 3.0)) * 6.0;
+    return clamp(abs(k - 3.0) - 1.0, vec3<f32>(0.0), vec3<f32>(1.0));
 }
 
 @fragment
@@ -48,6 +67,12 @@ fn fs_main(f: VertexOut) -> @location(0) vec4<f32> {
     let diffuse = max(dot(n, frame.light_dir.xyz), 0.0);
     let hemi = 0.5 + 0.5 * dot(n, frame.sky_up_has_color.xyz);
     let ambient = mix(0.12, 0.28, hemi);
-    let lit = f.color * (ambient + 0.75 * diffuse);
+    let lit = select(f.color * (ambient + 0.75 * diffuse), f.color, frame.mode.y > 0.5);
     return vec4<f32>(clamp(lit, vec3<f32>(0.0), vec3<f32>(1.0)), 1.0);
+}
+
+// Wireframe overlay: dark, half transparent edges.
+@fragment
+fn fs_wire(f: VertexOut) -> @location(0) vec4<f32> {
+    return vec4<f32>(0.05, 0.06, 0.08, 0.55);
 }

@@ -23,6 +23,53 @@ struct FrameUniform {
     light_dir: [f32; 4],
     sky_up_has_color: [f32; 4],
     clay: [f32; 4],
+    /// x: colour mode (0 natural, 1 by node, 2 by level); y: 1 = unlit; z: wireframe
+    /// pass (lines drawn dark); w unused.
+    mode: [f32; 4],
+}
+
+/// Where the light comes from.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Light {
+    /// A head light from just above and left of the eye (moves with the camera).
+    Headlight,
+    /// A directional light fixed in the model: unit direction TOWARD the light, model
+    /// coordinates (raking light: drag it low over a surface to read its relief).
+    Directional([f64; 3]),
+}
+
+/// How patches are coloured.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum ColorMode {
+    /// The model's colours (per-vertex colour, else clay).
+    #[default]
+    Natural,
+    /// A colour per node (patch boundaries show).
+    ByNode,
+    /// A colour per level of the hierarchy (coarse blue to fine red).
+    ByLevel,
+}
+
+/// Display options of a frame (the HUD's switches).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Shading {
+    pub light: Light,
+    /// Colour without lighting (scans with baked colour).
+    pub unlit: bool,
+    pub color_mode: ColorMode,
+    /// Triangle edges drawn over the surface (when the device can draw lines).
+    pub wireframe: bool,
+}
+
+impl Default for Shading {
+    fn default() -> Self {
+        Shading {
+            light: Light::Headlight,
+            unlit: false,
+            color_mode: ColorMode::Natural,
+            wireframe: false,
+        }
+    }
 }
 
 /// Per-frame constants derived from the camera.
@@ -33,6 +80,32 @@ pub struct FrameParams {
     pub light_dir: [f32; 3],
     /// Camera up, local frame.
     pub sky_up: [f32; 3],
+    /// Near and far planes used (model units).
+    pub near: f64,
+    pub far: f64,
+    pub shading: Shading,
+}
+
+/// Near and far planes around `spheres` (centre, radius; model or any frame shared with
+/// `eye`): far just beyond the farthest sphere, near just before the nearest one in
+/// front of the eye, but never below `far * 1e-6`. Depth is stored reversed (1 at near,
+/// 0 at far) in a 32-bit float buffer, whose precision is then nearly uniform in
+/// `log(depth)`: a ratio of 1e6 between far and near still separates surfaces 1e-5 of
+/// their distance apart, so a millimetre detail seen from a few millimetres on a 10 m
+/// statue neither clips nor z-fights. No spheres: `(far * 1e-6, 1)`.
+pub fn clip_planes(eye: DVec3, spheres: impl IntoIterator<Item = (DVec3, f64)>) -> (f64, f64) {
+    let (mut near, mut far) = (f64::INFINITY, 0.0f64);
+    for (c, r) in spheres {
+        let d = (c - eye).length();
+        far = far.max(d + r);
+        near = near.min(d - r);
+    }
+    if far <= 0.0 || !far.is_finite() {
+        return (1e-6, 1.0);
+    }
+    let far = far * 1.01;
+    let near = (near * 0.99).max(far * 1e-6);
+    (near, far)
 }
 
 impl FrameParams {
@@ -40,23 +113,42 @@ impl FrameParams {
     /// and far planes fitted around `bounds` (the model's bounding sphere, model
     /// coordinates).
     pub fn new(camera: &Camera, cube_origin: [f64; 3], bounds: [f64; 4]) -> FrameParams {
-        let eye = DVec3::from(camera.position);
-        let center = DVec3::new(bounds[0], bounds[1], bounds[2]);
-        let r = bounds[3].max(1e-9);
-        let d = (center - eye).length();
-        // Far just past the sphere; near as far forward as the sphere allows, but not
-        // below far/1e5 (depth precision) nor closer than when the eye is inside.
-        let far = (d + r) * 1.01;
-        let near = (d - r).max(far * 1e-5);
+        let c = DVec3::new(bounds[0], bounds[1], bounds[2]);
+        let planes = clip_planes(DVec3::from(camera.position), [(c, bounds[3].max(1e-9))]);
+        Self::with_planes(camera, cube_origin, planes, Shading::default())
+    }
+
+    /// Matrices for `camera` with the given near and far planes (see [`clip_planes`]):
+    /// a reversed-Z projection (near maps to depth 1, far to 0).
+    pub fn with_planes(
+        camera: &Camera,
+        cube_origin: [f64; 3],
+        (near, far): (f64, f64),
+        shading: Shading,
+    ) -> FrameParams {
         let view = camera.view_matrix_local(cube_origin);
-        let proj = camera.projection_matrix(near as f32, far as f32);
+        // Reversed Z: the same perspective with near and far swapped.
+        let proj = camera.projection_matrix(far as f32, near as f32);
         let b = camera.basis();
-        // Head light from above-left of the eye, so silhouettes still shade.
-        let to_light = (-b.forward + b.up * 0.45 - b.right * 0.3).normalize();
+        let to_light = match shading.light {
+            // Head light from above-left of the eye, so silhouettes still shade.
+            Light::Headlight => (-b.forward + b.up * 0.45 - b.right * 0.3).normalize(),
+            Light::Directional(d) => {
+                let d = DVec3::from(d);
+                if d.length_squared() > 0.0 && d.is_finite() {
+                    d.normalize()
+                } else {
+                    -b.forward
+                }
+            }
+        };
         FrameParams {
             view_proj: proj * view,
             light_dir: to_light.as_vec3().to_array(),
             sky_up: b.up.as_vec3().to_array(),
+            near,
+            far,
+            shading,
         }
     }
 }
@@ -64,6 +156,10 @@ impl FrameParams {
 /// Pipeline, uniforms and offscreen targets.
 pub struct Renderer {
     pipeline: wgpu::RenderPipeline,
+    /// Line pipeline of the wireframe overlay (None: the device cannot draw lines).
+    wire_pipeline: Option<wgpu::RenderPipeline>,
+    /// Whether the frame set last draws the wireframe overlay.
+    wireframe: std::cell::Cell<bool>,
     uniform: wgpu::Buffer,
     bind_group: wgpu::BindGroup,
     color_format: wgpu::TextureFormat,
@@ -79,8 +175,10 @@ struct Targets {
     height: u32,
     color: wgpu::Texture,
     color_view: wgpu::TextureView,
+    depth: wgpu::Texture,
     depth_view: wgpu::TextureView,
     readback: wgpu::Buffer,
+    depth_readback: wgpu::Buffer,
     padded_row: u32,
 }
 
@@ -120,42 +218,64 @@ impl Renderer {
                 2 => Unorm8x4
             ],
         };
-        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("tessera patch pipeline"),
-            layout: Some(&layout),
-            vertex: wgpu::VertexState {
-                module: &shader,
-                entry_point: Some("vs_main"),
-                compilation_options: Default::default(),
-                buffers: &[Some(vertex_layout)],
-            },
-            primitive: wgpu::PrimitiveState {
-                topology: wgpu::PrimitiveTopology::TriangleList,
-                front_face: wgpu::FrontFace::Ccw,
-                cull_mode: Some(wgpu::Face::Back),
-                ..Default::default()
-            },
-            depth_stencil: Some(wgpu::DepthStencilState {
-                format: DEPTH_FORMAT,
-                depth_write_enabled: Some(true),
-                depth_compare: Some(wgpu::CompareFunction::Less),
-                stencil: Default::default(),
-                bias: Default::default(),
-            }),
-            multisample: Default::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &shader,
-                entry_point: Some("fs_main"),
-                compilation_options: Default::default(),
-                targets: &[Some(wgpu::ColorTargetState {
-                    format: color_format,
-                    blend: None,
-                    write_mask: wgpu::ColorWrites::ALL,
-                })],
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
+        let make = |polygon_mode: wgpu::PolygonMode, fs: &str, bias: wgpu::DepthBiasState| {
+            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some("tessera patch pipeline"),
+                layout: Some(&layout),
+                vertex: wgpu::VertexState {
+                    module: &shader,
+                    entry_point: Some("vs_main"),
+                    compilation_options: Default::default(),
+                    buffers: &[Some(vertex_layout.clone())],
+                },
+                primitive: wgpu::PrimitiveState {
+                    topology: wgpu::PrimitiveTopology::TriangleList,
+                    front_face: wgpu::FrontFace::Ccw,
+                    cull_mode: Some(wgpu::Face::Back),
+                    polygon_mode,
+                    ..Default::default()
+                },
+                // Reversed Z: nearer is larger (see `clip_planes`).
+                depth_stencil: Some(wgpu::DepthStencilState {
+                    format: DEPTH_FORMAT,
+                    depth_write_enabled: Some(polygon_mode == wgpu::PolygonMode::Fill),
+                    depth_compare: Some(wgpu::CompareFunction::GreaterEqual),
+                    stencil: Default::default(),
+                    bias,
+                }),
+                multisample: Default::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module: &shader,
+                    entry_point: Some(fs),
+                    compilation_options: Default::default(),
+                    targets: &[Some(wgpu::ColorTargetState {
+                        format: color_format,
+                        blend: Some(wgpu::BlendState::ALPHA_BLENDING),
+                        write_mask: wgpu::ColorWrites::ALL,
+                    })],
+                }),
+                multiview_mask: None,
+                cache: None,
+            })
+        };
+        let pipeline = make(wgpu::PolygonMode::Fill, "fs_main", Default::default());
+        // Edges over the surface: lines need the device feature (lavapipe and desktop
+        // GPUs have it; WebGL does not), pulled toward the eye by a slope-scaled bias
+        // so they win the depth test against their own triangles.
+        let wire_pipeline = device
+            .features()
+            .contains(wgpu::Features::POLYGON_MODE_LINE)
+            .then(|| {
+                make(
+                    wgpu::PolygonMode::Line,
+                    "fs_wire",
+                    wgpu::DepthBiasState {
+                        constant: 4,
+                        slope_scale: 1.5,
+                        clamp: 0.0,
+                    },
+                )
+            });
         let uniform = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("tessera frame uniforms"),
             size: std::mem::size_of::<FrameUniform>() as u64,
@@ -172,6 +292,8 @@ impl Renderer {
         });
         Renderer {
             pipeline,
+            wire_pipeline,
+            wireframe: std::cell::Cell::new(false),
             uniform,
             bind_group,
             color_format,
@@ -205,14 +327,17 @@ impl Renderer {
             sample_count: 1,
             dimension: wgpu::TextureDimension::D2,
             format: self.color_format,
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+            // Sampled by a window's blit to its surface; copied by readback.
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT
+                | wgpu::TextureUsages::COPY_SRC
+                | wgpu::TextureUsages::TEXTURE_BINDING,
             view_formats: &[],
         });
         let color_view = color.create_view(&wgpu::TextureViewDescriptor {
             label: Some("tessera offscreen colour view"),
             ..Default::default()
         });
-        let depth_view = create_depth(device, width, height);
+        let (depth, depth_view) = create_depth_texture(device, width, height);
         let padded_row = (width * 4).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT)
             * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
         let readback = device.create_buffer(&wgpu::BufferDescriptor {
@@ -226,14 +351,32 @@ impl Renderer {
             height,
             color,
             color_view,
+            depth,
             depth_view,
             readback,
+            depth_readback: device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("tessera depth readback"),
+                size: u64::from(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT),
+                usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+                mapped_at_creation: false,
+            }),
             padded_row,
         });
     }
 
+    /// Whether the wireframe overlay can be drawn on this device.
+    pub fn can_draw_wireframe(&self) -> bool {
+        self.wire_pipeline.is_some()
+    }
+
     /// Writes the frame uniforms (call before encoding the frame's passes).
     pub fn set_frame(&self, queue: &wgpu::Queue, p: &FrameParams) {
+        self.wireframe.set(p.shading.wireframe);
+        let color_mode = match p.shading.color_mode {
+            ColorMode::Natural => 0.0,
+            ColorMode::ByNode => 1.0,
+            ColorMode::ByLevel => 2.0,
+        };
         let u = FrameUniform {
             view_proj: p.view_proj.to_cols_array_2d(),
             light_dir: [p.light_dir[0], p.light_dir[1], p.light_dir[2], 0.0],
@@ -244,19 +387,26 @@ impl Renderer {
                 if self.has_colors { 1.0 } else { 0.0 },
             ],
             clay: [0.78, 0.74, 0.68, 1.0],
+            mode: [
+                color_mode,
+                if p.shading.unlit { 1.0 } else { 0.0 },
+                0.0,
+                0.0,
+            ],
         };
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&u));
     }
 
     /// Encodes one pass drawing `slots` from `cache` into `color`/`depth`; clears both
-    /// first when `clear`, else keeps them (a frame drawn in several passes).
+    /// first when `clear`, else keeps them (a frame drawn in several passes). Each slot
+    /// comes with its node's [`instance_tag`] (the colour modes use it).
     pub fn encode_pass<'a>(
         &self,
         encoder: &mut wgpu::CommandEncoder,
         color: &wgpu::TextureView,
         depth: &wgpu::TextureView,
         cache: &GpuCache,
-        slots: impl Iterator<Item = &'a Slot>,
+        slots: impl Iterator<Item = (u32, &'a Slot)> + Clone,
         clear: bool,
     ) {
         let [r, g, b, a] = self.background;
@@ -279,7 +429,7 @@ impl Renderer {
                 view: depth,
                 depth_ops: Some(wgpu::Operations {
                     load: if clear {
-                        wgpu::LoadOp::Clear(1.0)
+                        wgpu::LoadOp::Clear(0.0)
                     } else {
                         wgpu::LoadOp::Load
                     },
@@ -295,11 +445,19 @@ impl Renderer {
         pass.set_bind_group(0, &self.bind_group, &[]);
         pass.set_vertex_buffer(0, cache.vertex_buffer().slice(..));
         pass.set_index_buffer(cache.index_buffer().slice(..), wgpu::IndexFormat::Uint32);
-        for s in slots {
+        for (tag, s) in slots.clone() {
             if s.indices.is_empty() {
                 continue;
             }
-            pass.draw_indexed(s.indices.clone(), s.vertices.start as i32, 0..1);
+            pass.draw_indexed(s.indices.clone(), s.vertices.start as i32, tag..tag + 1);
+        }
+        if let (true, Some(wire)) = (self.wireframe.get(), &self.wire_pipeline) {
+            pass.set_pipeline(wire);
+            for (tag, s) in slots {
+                if !s.indices.is_empty() {
+                    pass.draw_indexed(s.indices.clone(), s.vertices.start as i32, tag..tag + 1);
+                }
+            }
         }
     }
 
@@ -308,6 +466,64 @@ impl Renderer {
         self.targets
             .as_ref()
             .map(|t| (&t.color_view, &t.depth_view))
+    }
+
+    /// The offscreen colour texture (a window samples it onto its surface).
+    pub fn offscreen_color(&self) -> Option<&wgpu::TextureView> {
+        self.targets.as_ref().map(|t| &t.color_view)
+    }
+
+    /// The stored depth of pixel (`x`, `y`) of the last frame (reversed Z: 0 is the
+    /// background, 1 the near plane); None outside the target. Waits for the GPU.
+    pub fn read_depth(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        x: u32,
+        y: u32,
+    ) -> Result<Option<f32>, RenderError> {
+        let t = self.targets.as_ref().ok_or(RenderError::NoFrame)?;
+        if x >= t.width || y >= t.height {
+            return Ok(None);
+        }
+        let mut enc = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("tessera depth readback encoder"),
+        });
+        enc.copy_texture_to_buffer(
+            wgpu::TexelCopyTextureInfo {
+                texture: &t.depth,
+                mip_level: 0,
+                origin: wgpu::Origin3d { x, y, z: 0 },
+                aspect: wgpu::TextureAspect::DepthOnly,
+            },
+            wgpu::TexelCopyBufferInfo {
+                buffer: &t.depth_readback,
+                layout: wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT),
+                    rows_per_image: Some(1),
+                },
+            },
+            wgpu::Extent3d {
+                width: 1,
+                height: 1,
+                depth_or_array_layers: 1,
+            },
+        );
+        queue.submit([enc.finish()]);
+        let slice = t.depth_readback.slice(0..4);
+        slice.map_async(wgpu::MapMode::Read, |_| {});
+        device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| RenderError::Device(e.to_string()))?;
+        let d = {
+            let data = slice
+                .get_mapped_range()
+                .map_err(|e| RenderError::Device(format!("{e:?}")))?;
+            f32::from_le_bytes([data[0], data[1], data[2], data[3]])
+        };
+        t.depth_readback.unmap();
+        Ok(Some(d))
     }
 
     /// Copies the offscreen colour target to the CPU (waits for the GPU).
@@ -365,8 +581,18 @@ impl Renderer {
     }
 }
 
-/// A depth target for `width` x `height` (also for window surfaces).
-pub fn create_depth(device: &wgpu::Device, width: u32, height: u32) -> wgpu::TextureView {
+/// The instance index a node is drawn with: its level in the top 8 bits, its id in
+/// the low 24 (the shader's colour modes hash it; only the look depends on it).
+pub fn instance_tag(node: u32, level: u8) -> u32 {
+    (u32::from(level) << 24) | (node & 0x00FF_FFFF)
+}
+
+/// A depth target for `width` x `height`.
+fn create_depth_texture(
+    device: &wgpu::Device,
+    width: u32,
+    height: u32,
+) -> (wgpu::Texture, wgpu::TextureView) {
     let depth = device.create_texture(&wgpu::TextureDescriptor {
         label: Some("tessera depth"),
         size: wgpu::Extent3d {
@@ -378,11 +604,13 @@ pub fn create_depth(device: &wgpu::Device, width: u32, height: u32) -> wgpu::Tex
         sample_count: 1,
         dimension: wgpu::TextureDimension::D2,
         format: DEPTH_FORMAT,
-        usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
+        // Copied from for the depth under the cursor (zoom to point).
+        usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
         view_formats: &[],
     });
-    depth.create_view(&wgpu::TextureViewDescriptor {
+    let view = depth.create_view(&wgpu::TextureViewDescriptor {
         label: Some("tessera depth view"),
         ..Default::default()
-    })
+    });
+    (depth, view)
 }

@@ -9,7 +9,7 @@ use glam::DVec3;
 use serde_json::Value;
 
 /// Fields of a path document.
-pub const PATH_FIELDS: [&str; 3] = ["frames", "loop", "keyframes"];
+pub const PATH_FIELDS: [&str; 4] = ["frames", "loop", "keyframes", "duration_s"];
 
 /// A camera path that could not be read, with the file and the field to blame.
 #[derive(Debug, thiserror::Error)]
@@ -42,6 +42,12 @@ pub struct CameraPath {
     pub frames: u32,
     /// Go back from the last keyframe to the first (closed loops, turntables).
     pub closed: bool,
+    /// Real-time playback (`tessera view --script`): each keyframe's time in seconds
+    /// (`time_s` on every keyframe, increasing), or None to spread [`Self::duration_s`]
+    /// evenly over the segments.
+    pub times: Option<Vec<f64>>,
+    /// Real-time playback length in seconds (`duration_s`; default `frames / 30`).
+    pub duration_s: Option<f64>,
 }
 
 impl CameraPath {
@@ -105,6 +111,18 @@ impl CameraPath {
             Some(Value::Bool(b)) => *b,
             Some(v) => return Err(field("loop", format!("expected true or false, got {v}"))),
         };
+        let duration_s = match obj.get("duration_s") {
+            None => None,
+            Some(v) => match v.as_f64() {
+                Some(d) if d.is_finite() && d > 0.0 && d <= 1e7 => Some(d),
+                _ => {
+                    return Err(field(
+                        "duration_s",
+                        format!("expected a number of seconds in (0, 1e7], got {v}"),
+                    ))
+                }
+            },
+        };
         let list = match obj.get("keyframes") {
             None => return Err(field("keyframes", "missing (a list of cameras)".into())),
             Some(Value::Array(a)) if !a.is_empty() => a,
@@ -116,11 +134,43 @@ impl CameraPath {
             }
         };
         let mut keyframes = Vec::with_capacity(list.len());
+        let mut times = Vec::new();
         for (i, k) in list.iter().enumerate() {
             let mut k = k.clone();
             if let Some(o) = k.as_object_mut() {
                 o.entry("width").or_insert(Value::from(width));
                 o.entry("height").or_insert(Value::from(height));
+                if let Some(t) = o.remove("time_s") {
+                    let name = format!("keyframes[{i}].time_s");
+                    match t.as_f64() {
+                        Some(t) if t.is_finite() && t >= 0.0 && t <= 1e7 => {
+                            if times.last().is_some_and(|&p| t <= p) {
+                                return Err(field(
+                                    &name,
+                                    format!("must be later than the keyframe before, got {t}"),
+                                ));
+                            }
+                            if times.len() != i {
+                                return Err(field(
+                                    &name,
+                                    "give `time_s` on every keyframe or on none".into(),
+                                ));
+                            }
+                            times.push(t);
+                        }
+                        _ => {
+                            return Err(field(
+                                &name,
+                                format!("expected seconds from 0 to 1e7, got {t}"),
+                            ))
+                        }
+                    }
+                } else if !times.is_empty() {
+                    return Err(field(
+                        &format!("keyframes[{i}].time_s"),
+                        "give `time_s` on every keyframe or on none".into(),
+                    ));
+                }
             }
             let mut cam = Camera::from_json_value(&k).map_err(|e| {
                 PathError::Camera(
@@ -132,11 +182,65 @@ impl CameraPath {
             cam.height = height;
             keyframes.push(cam);
         }
+        if closed && !times.is_empty() {
+            return Err(field(
+                "loop",
+                "a looping path cannot have keyframe times (use duration_s)".into(),
+            ));
+        }
+        if !times.is_empty() && duration_s.is_some() {
+            return Err(field(
+                "duration_s",
+                "give keyframe times or a duration, not both".into(),
+            ));
+        }
         Ok(CameraPath {
             keyframes,
             frames,
             closed,
+            times: (!times.is_empty()).then_some(times),
+            duration_s,
         })
+    }
+
+    /// Seconds a real-time playback of the path lasts: the last keyframe's `time_s`, or
+    /// `duration_s`, or `frames / 30`.
+    pub fn playback_seconds(&self) -> f64 {
+        match (&self.times, self.duration_s) {
+            (Some(t), _) => t.last().copied().unwrap_or(0.0),
+            (None, Some(d)) => d,
+            (None, None) => f64::from(self.frames.max(1)) / 30.0,
+        }
+    }
+
+    /// The camera at `t_s` seconds into a real-time playback (clamped to the path):
+    /// between the keyframes whose times bracket it, interpolated as [`Self::cameras`]
+    /// does; without keyframe times the segments share the duration evenly.
+    pub fn camera_at(&self, t_s: f64) -> Camera {
+        let k = self.keyframes.len();
+        if k == 1 {
+            return self.keyframes[0].clone();
+        }
+        let t = if t_s.is_finite() { t_s.max(0.0) } else { 0.0 };
+        let (s, f) = match &self.times {
+            Some(times) => {
+                if t <= times[0] {
+                    return self.keyframes[0].clone();
+                }
+                match times.iter().position(|&x| x > t) {
+                    None => return self.keyframes[k - 1].clone(),
+                    Some(j) => (j - 1, (t - times[j - 1]) / (times[j] - times[j - 1])),
+                }
+            }
+            None => {
+                let segments = if self.closed { k } else { k - 1 };
+                let d = self.playback_seconds();
+                let u = (t / d).min(1.0) * segments as f64;
+                let s = (u.floor() as usize).min(segments - 1);
+                (s, u - s as f64)
+            }
+        };
+        lerp_camera(&self.keyframes[s], &self.keyframes[(s + 1) % k], f)
     }
 
     /// An orbit of `frames` frames around a bounding sphere: the whole sphere in view
@@ -168,6 +272,8 @@ impl CameraPath {
             keyframes,
             frames: n,
             closed: false,
+            times: None,
+            duration_s: None,
         }
     }
 
@@ -310,6 +416,41 @@ mod tests {
         }
         let e = parse("{").unwrap_err().to_string();
         assert!(e.contains("not valid JSON"), "{e}");
+    }
+
+    #[test]
+    fn real_time_playback_follows_keyframe_times() {
+        let b = r#"{"position":[0,0,9],"target":[0,0,0],"up":[0,1,0],"fov_y_deg":45,"time_s":2}"#;
+        let a = KEY.replace("45}", "45,\"time_s\":0.5}");
+        let p = parse(&format!(r#"{{"frames": 3, "keyframes": [{a}, {b}]}}"#)).unwrap();
+        assert_eq!(p.playback_seconds(), 2.0);
+        assert_eq!(p.camera_at(0.0).position, [0.0, 0.0, 5.0]);
+        assert_eq!(p.camera_at(1.25).position, [0.0, 0.0, 7.0]);
+        assert_eq!(p.camera_at(5.0).position, [0.0, 0.0, 9.0]);
+        // Even spread over duration_s without times.
+        let b2 = b.replace(",\"time_s\":2", "");
+        let p = parse(&format!(
+            r#"{{"frames": 3, "duration_s": 4, "keyframes": [{KEY}, {b2}]}}"#
+        ))
+        .unwrap();
+        assert_eq!(p.camera_at(2.0).position, [0.0, 0.0, 7.0]);
+        assert_eq!(p.playback_seconds(), 4.0);
+        // Times on some keyframes only, decreasing times, both times and a duration.
+        for bad in [
+            format!(r#"{{"frames": 3, "keyframes": [{KEY}, {b}]}}"#),
+            format!(
+                r#"{{"frames": 3, "keyframes": [{a}, {}]}}"#,
+                b.replace(":2}", ":0.1}")
+            ),
+            format!(r#"{{"frames": 3, "duration_s": 3, "keyframes": [{a}, {b}]}}"#),
+            format!(r#"{{"frames": 3, "duration_s": -1, "keyframes": [{KEY}]}}"#),
+        ] {
+            let e = parse(&bad).expect_err(&bad).to_string();
+            assert!(
+                e.contains("time_s") || e.contains("duration_s"),
+                "{bad} -> {e}"
+            );
+        }
     }
 
     #[test]

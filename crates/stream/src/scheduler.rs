@@ -421,6 +421,18 @@ impl Scheduler {
         &self.opts
     }
 
+    /// Changes the screen-space tolerance from the next frame on (a viewer's slider).
+    pub fn set_tolerance_px(&mut self, tolerance_px: f32) {
+        if tolerance_px.is_finite() && tolerance_px > 0.0 {
+            self.opts.tolerance_px = tolerance_px;
+        }
+    }
+
+    /// Turns asking for the prefetch set on or off from the next frame on.
+    pub fn set_prefetch(&mut self, prefetch: bool) {
+        self.opts.prefetch = prefetch;
+    }
+
     /// The residency groups.
     pub fn groups(&self) -> &Groups {
         &self.groups
