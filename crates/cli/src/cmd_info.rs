@@ -83,7 +83,13 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     let model =
         crate::open::open_model(&a.model).with_context(|| format!("{}", a.model.display()))?;
     let m = model.index();
-    let j = info_json(m, &a.model.display().to_string());
+    let mut j = info_json(m, &a.model.display().to_string());
+    // The extent of the coarsest level (root patches) and the up axis guessed from it,
+    // which `view` and `render --orbit` use unless given `--up`.
+    let scene = tessera_viewer::scene_points(model.as_ref(), 1);
+    let up = tessera_nav::guess_up(scene.min.to_array(), scene.max.to_array());
+    j["extent"] = json!({ "min": scene.min.to_array(), "max": scene.max.to_array() });
+    j["up_guess"] = json!(up.to_string());
     if a.json {
         println!("{}", serde_json::to_string_pretty(&j)?);
         return Ok(ExitCode::SUCCESS);
@@ -132,6 +138,12 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     println!(
         "  bounding sphere center [{:.6}, {:.6}, {:.6}] radius {:.6}",
         h.bounding_sphere[0], h.bounding_sphere[1], h.bounding_sphere[2], h.bounding_sphere[3]
+    );
+    let size = scene.max - scene.min;
+    println!(
+        "  extent          {:.6} x {:.6} x {:.6} (roots); up axis guessed {} (the tallest; \
+         `view`/`render --up` override)",
+        size.x, size.y, size.z, up
     );
     let ix = m.index_stats();
     println!(

@@ -20,9 +20,14 @@ pub struct Args {
     /// Camera path (JSON keyframes, see docs/camera.md).
     #[arg(long, value_name = "PATH.json")]
     path: Option<PathBuf>,
-    /// Render N frames orbiting the model's bounding sphere instead of a path file.
+    /// Render N frames orbiting the model instead of a path file (around the up axis,
+    /// framed by the model's extent).
     #[arg(long, value_name = "N")]
     orbit: Option<u32>,
+    /// Up axis of the orbit: +x, -x, +y, -y, +z or -z (default: the axis the model is
+    /// tallest along, as `tessera info` states).
+    #[arg(long, value_name = "AXIS")]
+    up: Option<tessera_nav::UpAxis>,
     /// Directory for the PNG frames (created if missing).
     #[arg(long, value_name = "DIR")]
     out: Option<PathBuf>,
@@ -76,7 +81,12 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     let path = match (&a.path, a.orbit) {
         (Some(p), _) => CameraPath::from_file(p, a.width, a.height)?,
         (None, Some(n)) => {
-            CameraPath::orbit(model.index().header().bounding_sphere, n, a.width, a.height)
+            let scene = tessera_viewer::scene_points(model.as_ref(), 20_000);
+            let up = a.up.unwrap_or_else(|| {
+                tessera_nav::guess_up(scene.min.to_array(), scene.max.to_array())
+            });
+            tessera_viewer::orbit_path(&scene, up, n, a.width, a.height)
+                .context("cannot frame the model for an orbit")?
         }
         (None, None) => bail!("give --path or --orbit"),
     };

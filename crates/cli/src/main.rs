@@ -4,12 +4,14 @@
 //! print the result. Errors are printed once, on one line, with a non-zero exit.
 
 mod cmd_build;
+mod cmd_demo;
 mod cmd_extract;
 mod cmd_gen;
 mod cmd_info;
 mod cmd_render;
 mod cmd_serve;
 mod cmd_verify;
+mod cmd_view;
 mod open;
 mod progress;
 
@@ -43,6 +45,11 @@ enum Command {
     Render(cmd_render::Args),
     /// Serve models over HTTP: range requests, ETags, CORS, a JSON catalogue.
     Serve(cmd_serve::Args),
+    /// Build the bundled Nefertiti scan (once, into a cache) and open it in the viewer
+    /// (without a display: render an orbit to PNG files).
+    Demo(cmd_demo::Args),
+    /// Open a model in a window: navigate, pick and measure at full resolution.
+    View(cmd_view::Args),
 }
 
 fn main() -> ExitCode {
@@ -71,6 +78,8 @@ fn main() -> ExitCode {
         Command::Gen(a) => cmd_gen::run(a),
         Command::Render(a) => cmd_render::run(a),
         Command::Serve(a) => cmd_serve::run(a),
+        Command::View(a) => cmd_view::run(a),
+        Command::Demo(a) => cmd_demo::run(a),
     };
     match result {
         Ok(code) => code,

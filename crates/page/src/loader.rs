@@ -168,7 +168,7 @@ fn delay(shared: &Shared, delay: Duration) -> bool {
 }
 
 /// A loader thread's body: take a batch (the top node and its queued neighbours), read
-/// + decode it unlocked with one [`PatchReader::decode_patches`], publish; until
+/// and decode it unlocked with one [`PatchReader::decode_patches`], publish; until
 /// shutdown.
 pub(crate) fn run(shared: &Shared) {
     loop {

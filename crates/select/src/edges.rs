@@ -55,7 +55,7 @@ fn collinear(a: [u32; 3], b: [u32; 3], c: [u32; 3]) -> bool {
 pub fn edge_report(indices: &[u32], positions: &[[u32; 3]]) -> EdgeReport {
     // Canonical id per vertex: the first vertex with the same position.
     let mut by_position: HashMap<[u32; 3], u32, FxBuildHasher> =
-        HashMap::with_capacity_and_hasher(positions.len(), FxBuildHasher::default());
+        HashMap::with_capacity_and_hasher(positions.len(), FxBuildHasher);
     let canonical: Vec<u32> = positions
         .iter()
         .enumerate()
@@ -65,7 +65,7 @@ pub fn edge_report(indices: &[u32], positions: &[[u32; 3]]) -> EdgeReport {
 
     let mut report = EdgeReport::default();
     let mut uses: HashMap<u64, u32, FxBuildHasher> =
-        HashMap::with_capacity_and_hasher(indices.len(), FxBuildHasher::default());
+        HashMap::with_capacity_and_hasher(indices.len(), FxBuildHasher);
     for tri in indices.chunks_exact(3) {
         report.triangles += 1;
         let ids = [

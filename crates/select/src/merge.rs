@@ -86,7 +86,7 @@ pub fn merge_patches<'a>(patches: impl IntoIterator<Item = PatchRef<'a>>) -> Cut
         indices: Vec::with_capacity(index_count),
     };
     let mut welded: HashMap<VertexKey, u32, FxBuildHasher> =
-        HashMap::with_capacity_and_hasher(vertex_bound, FxBuildHasher::default());
+        HashMap::with_capacity_and_hasher(vertex_bound, FxBuildHasher);
     let mut remap: Vec<u32> = Vec::new();
     let mut dropped = 0usize;
 

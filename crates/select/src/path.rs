@@ -143,7 +143,7 @@ impl CameraPath {
                 if let Some(t) = o.remove("time_s") {
                     let name = format!("keyframes[{i}].time_s");
                     match t.as_f64() {
-                        Some(t) if t.is_finite() && t >= 0.0 && t <= 1e7 => {
+                        Some(t) if (0.0..=1e7).contains(&t) => {
                             if times.last().is_some_and(|&p| t <= p) {
                                 return Err(field(
                                     &name,

@@ -1,0 +1,90 @@
+//! Full-resolution picks off the frame's thread: a pick reads the leaf patches under
+//! the ray from the model (a cold pick reads a few patches from disk or the network),
+//! so it runs on a worker and the frame never waits; the answer arrives a frame or two
+//! later.
+
+use std::sync::mpsc::{channel, Receiver, Sender};
+use std::sync::Arc;
+use std::time::Instant;
+
+use tessera_format::PatchReader;
+use tessera_pick::{Hit, Ray};
+
+/// What a pick is for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Purpose {
+    /// Double-click: recentre the orbit on the point.
+    Recentre,
+    /// Measure mode: the next end of the measured segment.
+    Measure,
+    /// A click with nothing else to do: show the point.
+    Inspect,
+}
+
+/// A finished pick.
+pub struct Picked {
+    pub purpose: Purpose,
+    /// None: the ray met no surface.
+    pub hit: Option<Hit>,
+    pub ms: f64,
+    /// An error reading the model (the pick found nothing it could trust).
+    pub error: Option<String>,
+}
+
+/// The worker and its two channels.
+pub struct Picker {
+    tx: Sender<(Purpose, Ray)>,
+    rx: Receiver<Picked>,
+    pending: usize,
+}
+
+impl Picker {
+    pub fn new(model: Arc<dyn PatchReader>) -> Picker {
+        let (tx, jobs) = channel::<(Purpose, Ray)>();
+        let (done, rx) = channel();
+        std::thread::Builder::new()
+            .name("tessera-pick".into())
+            .spawn(move || {
+                for (purpose, ray) in jobs {
+                    let t0 = Instant::now();
+                    let (hit, error) = match tessera_pick::pick(model.as_ref(), &ray) {
+                        Ok((hit, _stats)) => (hit, None),
+                        Err(e) => (None, Some(e.to_string())),
+                    };
+                    let ms = t0.elapsed().as_secs_f64() * 1e3;
+                    if done
+                        .send(Picked {
+                            purpose,
+                            hit,
+                            ms,
+                            error,
+                        })
+                        .is_err()
+                    {
+                        break;
+                    }
+                }
+            })
+            .expect("spawn the pick thread");
+        Picker { tx, rx, pending: 0 }
+    }
+
+    /// Queues a pick along `ray`.
+    pub fn pick(&mut self, purpose: Purpose, ray: Ray) {
+        if self.tx.send((purpose, ray)).is_ok() {
+            self.pending += 1;
+        }
+    }
+
+    /// Picks finished since the last call.
+    pub fn poll(&mut self) -> Vec<Picked> {
+        let done: Vec<Picked> = self.rx.try_iter().collect();
+        self.pending -= done.len().min(self.pending);
+        done
+    }
+
+    /// Picks queued and not answered yet.
+    pub fn pending(&self) -> usize {
+        self.pending
+    }
+}
