@@ -101,6 +101,9 @@ struct Running {
     finishing: bool,
     /// Blit + HUD + present of the last frame, milliseconds.
     present_ms: f64,
+    /// The loop slept since the last frame (nothing changed): the time since then is
+    /// not a frame time.
+    idle: bool,
 }
 
 impl ApplicationHandler for App {
@@ -148,13 +151,16 @@ impl ApplicationHandler for App {
             _ => {}
         }
         if r.script.is_none() {
+            if let WindowEvent::KeyboardInput { event: k, .. } = &event {
+                tracing::debug!(key = ?k.physical_key, consumed = response.consumed, "key event");
+            }
             r.input_event(&event, response.consumed, event_loop);
         }
         r.window.request_redraw();
     }
 
     fn about_to_wait(&mut self, event_loop: &ActiveEventLoop) {
-        let Some(r) = self.running.as_ref() else {
+        let Some(r) = self.running.as_mut() else {
             return;
         };
         // Draw continuously while anything changes (camera, loads, picks, a script);
@@ -164,6 +170,7 @@ impl ApplicationHandler for App {
             r.window.request_redraw();
         } else {
             event_loop.set_control_flow(ControlFlow::Wait);
+            r.idle = true;
         }
     }
 
@@ -309,6 +316,7 @@ impl Running {
             message: None,
             finishing: false,
             present_ms: 0.0,
+            idle: false,
         })
     }
 
@@ -360,6 +368,7 @@ impl Running {
     fn frame(&mut self) -> Result<bool, ViewError> {
         let now = Instant::now();
         let dt = now.duration_since(self.last_frame).as_secs_f64().min(0.25);
+        let slept = std::mem::take(&mut self.idle);
         let wall_ms = now.duration_since(self.last_frame).as_secs_f64() * 1e3;
         self.last_frame = now;
         for p in self.picker.poll() {
@@ -386,9 +395,14 @@ impl Running {
         select.width = camera.width;
         select.height = camera.height;
         self.stats = self.viewer.render_with(&select, &camera)?;
-        if self.frame > 0 {
-            self.hud.push_frame_ms(wall_ms as f32);
-        }
+        // After a sleep (or for the first frame) the frame's own time stands in for the
+        // time since the last one.
+        let wall_ms = if slept || self.frame == 0 {
+            self.stats.frame_ms + self.present_ms
+        } else {
+            wall_ms
+        };
+        self.hud.push_frame_ms(wall_ms as f32);
         let read = self.viewer.pager_stats().bytes_read;
         let since = now.duration_since(self.read_mark.0).as_secs_f64();
         if since >= 0.5 {
@@ -458,6 +472,13 @@ impl Running {
         let raw = self.egui_state.take_egui_input(&self.window);
         let adapter = self.viewer.gpu().adapter_label.clone();
         let message = self.message.as_ref().map(|(m, _)| m.clone());
+        let camera = self.nav.camera();
+        let ppp = self.window.scale_factor() as f32;
+        let to_screen = |p: &[f64; 3]| {
+            project(&camera, *p).map(|(x, y)| egui::pos2(x as f32 / ppp, y as f32 / ppp))
+        };
+        let measure_screen = self.measure.iter().filter_map(to_screen).collect();
+        let picked_screen = self.picked.as_ref().and_then(|(p, _, _)| to_screen(p));
         let info = hud::Info {
             name: &self.name,
             adapter: &adapter,
@@ -474,6 +495,8 @@ impl Running {
             picks_pending: self.picker.pending(),
             message: message.as_deref(),
             units_step: self.viewer.index().grid().step(),
+            measure_screen,
+            picked_screen,
         };
         let hud_state = &mut self.hud;
         let mut actions = Vec::new();
@@ -547,7 +570,7 @@ impl Running {
         let line = serde_json::json!({
             "frame": self.frame,
             "t_s": now.duration_since(self.started).as_secs_f64(),
-            "frame_ms": if self.frame == 0 { s.frame_ms } else { wall_ms },
+            "frame_ms": wall_ms,
             "render_ms": s.frame_ms,
             "present_ms": self.present_ms,
             "triangles": s.triangles,
@@ -559,6 +582,7 @@ impl Running {
             "ram_bytes": s.ram_resident_bytes,
             "selection_ms": s.selection_ms,
             "failed_patches": s.failed_patches,
+            "rss_bytes": current_rss_bytes(),
         });
         writeln!(log, "{line}").map_err(|e| ViewError::Other(format!("frame log: {e}")))
     }
@@ -774,6 +798,7 @@ impl Running {
     }
 
     fn key(&mut self, event: &KeyEvent, event_loop: &ActiveEventLoop) {
+        tracing::debug!(key = ?event.physical_key, state = ?event.state, "key");
         let pressed = event.state == ElementState::Pressed;
         let PhysicalKey::Code(code) = event.physical_key else {
             return;
@@ -848,4 +873,32 @@ impl Running {
             }
         }
     }
+}
+
+/// Resident set size of this process (Linux: /proc/self/statm; 0 elsewhere), for the
+/// frame log: on lavapipe the GPU cache lives in host memory, so this is the figure a
+/// `--memory` budget bounds.
+fn current_rss_bytes() -> u64 {
+    std::fs::read_to_string("/proc/self/statm")
+        .ok()
+        .and_then(|s| s.split_whitespace().nth(1)?.parse::<u64>().ok())
+        .map_or(0, |pages| pages * 4096)
+}
+
+/// Pixel coordinates (from the top left) of model point `p` seen by `camera`; None
+/// behind the eye.
+fn project(camera: &Camera, p: [f64; 3]) -> Option<(f64, f64)> {
+    let b = camera.basis();
+    let v = DVec3::from(p) - DVec3::from(camera.position);
+    let z = v.dot(b.forward);
+    if z <= 0.0 {
+        return None;
+    }
+    let tan_y = (0.5 * camera.fov_y_rad()).tan();
+    let x = v.dot(b.right) / (z * tan_y * camera.aspect());
+    let y = v.dot(b.up) / (z * tan_y);
+    Some((
+        (x + 1.0) * 0.5 * f64::from(camera.width),
+        (1.0 - y) * 0.5 * f64::from(camera.height),
+    ))
 }

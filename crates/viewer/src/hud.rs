@@ -99,6 +99,10 @@ pub struct Info<'a> {
     pub picks_pending: usize,
     pub message: Option<&'a str>,
     pub units_step: f64,
+    /// Screen positions (points, not pixels) of the measured points, and of the picked
+    /// point, where they are in front of the camera.
+    pub measure_screen: Vec<egui::Pos2>,
+    pub picked_screen: Option<egui::Pos2>,
 }
 
 fn mib(b: u64) -> f64 {
@@ -114,6 +118,21 @@ pub fn draw(ctx: &egui::Context, hud: &mut Hud, info: &Info) -> Vec<Action> {
             .show(ctx, |ui| {
                 egui::Frame::popup(ui.style()).show(ui, |ui| ui.label(m));
             });
+    }
+    // Markers over the model: the picked point, the measured points and their segment.
+    let painter = ctx.layer_painter(egui::LayerId::new(
+        egui::Order::Background,
+        egui::Id::unique("tessera-markers"),
+    ));
+    let yellow = egui::Color32::from_rgb(255, 210, 60);
+    if let [a, b] = info.measure_screen[..] {
+        painter.line_segment([a, b], egui::Stroke::new(2.0, yellow));
+    }
+    for &p in &info.measure_screen {
+        painter.circle(p, 4.0, yellow, egui::Stroke::new(1.0, egui::Color32::BLACK));
+    }
+    if let Some(p) = info.picked_screen {
+        painter.circle_stroke(p, 6.0, egui::Stroke::new(1.5, egui::Color32::WHITE));
     }
     if !hud.visible {
         return actions;
