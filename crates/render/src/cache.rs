@@ -12,6 +12,11 @@
 //! The cache is mechanics only: which patches to hold and what to evict is decided by
 //! `tessera_stream::Scheduler`, through [`GpuStore`], the cache's `ResidentStore`
 //! face. The buffers start small and grow on demand up to the budget.
+//!
+//! Several models share one cache: slots are keyed by (model, node), so the buffers,
+//! the allocators and their free space are shared, and each model's scheduler sees its
+//! own [`GpuStore`] (its uploads, evictions and bytes). The single-model methods
+//! (`slot`, `upload`, `evict`, ...) are model 0's.
 
 use std::ops::Range;
 
@@ -93,9 +98,18 @@ pub struct GpuCacheStats {
 pub struct GpuCache {
     vertices: Pool,
     indices: Pool,
-    slots: FxHashMap<u32, Slot>,
+    /// Keyed by [`slot_key`] (model, node).
+    slots: FxHashMap<u64, Slot>,
     stats: GpuCacheStats,
+    /// Per model: resident bytes and patches, uploads, evictions.
+    per_model: Vec<GpuCacheStats>,
     scratch: Vec<GpuVertex>,
+}
+
+/// The key of `node` of `model` in the cache.
+#[inline]
+fn slot_key(model: u32, node: u32) -> u64 {
+    (u64::from(model) << 32) | u64::from(node)
 }
 
 /// Capacity each buffer starts with; it doubles on demand up to the budget, so memory
@@ -223,6 +237,7 @@ impl GpuCache {
             ),
             slots: FxHashMap::default(),
             stats: GpuCacheStats::default(),
+            per_model: Vec::new(),
             scratch: Vec::new(),
         }
     }
@@ -262,19 +277,31 @@ impl GpuCache {
         true
     }
 
-    /// The slot of a resident node.
+    /// The slot of a resident node (of model 0).
     #[inline]
     pub fn slot(&self, node: u32) -> Option<&Slot> {
-        self.slots.get(&node)
+        self.slot_of(0, node)
     }
 
-    /// Whether `node` is resident.
+    /// The slot of resident `node` of `model`.
+    #[inline]
+    pub fn slot_of(&self, model: u32, node: u32) -> Option<&Slot> {
+        self.slots.get(&slot_key(model, node))
+    }
+
+    /// Whether `node` (of model 0) is resident.
     #[inline]
     pub fn contains(&self, node: u32) -> bool {
-        self.slots.contains_key(&node)
+        self.contains_of(0, node)
     }
 
-    /// Counters.
+    /// Whether `node` of `model` is resident.
+    #[inline]
+    pub fn contains_of(&self, model: u32, node: u32) -> bool {
+        self.slots.contains_key(&slot_key(model, node))
+    }
+
+    /// Counters of the whole cache (every model).
     pub fn stats(&self) -> GpuCacheStats {
         GpuCacheStats {
             resident_patches: self.slots.len(),
@@ -282,9 +309,68 @@ impl GpuCache {
         }
     }
 
-    /// Uploads `patch` for `node`, growing the buffers up to the budget when there is
-    /// no room; [`StoreError::Full`] when they are at their maximum and still have no
-    /// room (the caller evicts and retries). A node already resident is left as is.
+    /// Counters of `model`'s patches.
+    pub fn model_stats(&self, model: u32) -> GpuCacheStats {
+        self.per_model
+            .get(model as usize)
+            .copied()
+            .unwrap_or_default()
+    }
+
+    /// Whether `nv` vertices and `ni` indices more would fit, counting growth up to the
+    /// budget (a contiguous range may still be missing: fragmentation).
+    pub fn has_room(&self, nv: u64, ni: u64) -> bool {
+        let free =
+            |p: &Pool| u64::from(p.alloc.total_available()) + u64::from(p.max - p.capacity());
+        free(&self.vertices) >= nv && free(&self.indices) >= ni
+    }
+
+    /// Bytes the models' patches can take together, at most: the budget, or less when
+    /// the resident patches' mix of vertex and index bytes would fill one of the two
+    /// buffers first (each is capped at half the budget).
+    pub fn usable_bytes(&self) -> u64 {
+        let v = u64::from(self.vertices.capacity() - self.vertices.alloc.total_available())
+            * VERTEX_BYTES;
+        let i =
+            u64::from(self.indices.capacity() - self.indices.alloc.total_available()) * INDEX_BYTES;
+        let (max_v, max_i) = (
+            u64::from(self.vertices.max) * VERTEX_BYTES,
+            u64::from(self.indices.max) * INDEX_BYTES,
+        );
+        if v + i == 0 {
+            return max_v + max_i;
+        }
+        let total = (v + i) as f64;
+        let by_v = if v > 0 {
+            max_v as f64 * total / v as f64
+        } else {
+            f64::INFINITY
+        };
+        let by_i = if i > 0 {
+            max_i as f64 * total / i as f64
+        } else {
+            f64::INFINITY
+        };
+        (by_v.min(by_i) as u64).min(max_v + max_i)
+    }
+
+    /// Bytes the buffers can grow to (the cache's budget, as clamped).
+    pub fn max_bytes(&self) -> u64 {
+        u64::from(self.vertices.max) * VERTEX_BYTES + u64::from(self.indices.max) * INDEX_BYTES
+    }
+
+    fn model_entry(&mut self, model: u32) -> &mut GpuCacheStats {
+        let i = model as usize;
+        if self.per_model.len() <= i {
+            self.per_model.resize(i + 1, GpuCacheStats::default());
+        }
+        &mut self.per_model[i]
+    }
+
+    /// Uploads `patch` for `node` (of model 0), growing the buffers up to the budget
+    /// when there is no room; [`StoreError::Full`] when they are at their maximum and
+    /// still have no room (the caller evicts and retries). A node already resident is
+    /// left as is.
     pub fn upload(
         &mut self,
         device: &wgpu::Device,
@@ -293,7 +379,21 @@ impl GpuCache {
         patch: &PatchData,
         quant_step: f64,
     ) -> Result<u64, StoreError> {
-        if self.slots.contains_key(&node) {
+        self.upload_for(device, queue, 0, node, patch, quant_step)
+    }
+
+    /// [`GpuCache::upload`] for `node` of `model`.
+    pub fn upload_for(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        model: u32,
+        node: u32,
+        patch: &PatchData,
+        quant_step: f64,
+    ) -> Result<u64, StoreError> {
+        let key = slot_key(model, node);
+        if self.slots.contains_key(&key) {
             return Ok(0);
         }
         let nv = u32::try_from(patch.positions.len()).map_err(|_| StoreError::TooBig)?;
@@ -323,7 +423,12 @@ impl GpuCache {
         self.stats.resident_bytes += bytes;
         self.stats.uploaded_bytes += bytes;
         self.stats.uploads += 1;
-        self.slots.insert(node, slot);
+        let m = self.model_entry(model);
+        m.resident_bytes += bytes;
+        m.uploaded_bytes += bytes;
+        m.uploads += 1;
+        m.resident_patches += 1;
+        self.slots.insert(key, slot);
         Ok(bytes)
     }
 
@@ -338,39 +443,66 @@ impl GpuCache {
         }
     }
 
-    /// Frees `node`'s slot (nothing if not resident).
+    /// Frees `node`'s slot (of model 0; nothing if not resident).
     pub fn evict(&mut self, node: u32) {
-        if let Some(slot) = self.slots.remove(&node) {
-            self.stats.resident_bytes -= slot.bytes();
-            self.stats.evictions += 1;
+        self.evict_of(0, node);
+    }
+
+    /// Frees the slot of `node` of `model` (nothing if not resident).
+    pub fn evict_of(&mut self, model: u32, node: u32) {
+        if let Some(slot) = self.slots.remove(&slot_key(model, node)) {
+            let bytes = slot.bytes();
             self.vertices.free(slot.vertices);
             self.indices.free(slot.indices);
+            self.stats.resident_bytes -= bytes;
+            self.stats.evictions += 1;
+            let m = self.model_entry(model);
+            m.resident_bytes -= bytes;
+            m.evictions += 1;
+            m.resident_patches -= 1;
         }
     }
 }
 
-/// The cache as the streaming core's [`ResidentStore`]: the cache with the device and
-/// queue it uploads through and the model's grid step.
+/// The cache as the streaming core's [`ResidentStore`] for one model: the cache with
+/// the device and queue it uploads through, the model's grid step and its number in
+/// the cache (0 for a single model).
 pub struct GpuStore<'a> {
     pub cache: &'a mut GpuCache,
     pub device: &'a wgpu::Device,
     pub queue: &'a wgpu::Queue,
     pub quant_step: f64,
+    pub model: u32,
 }
 
 impl ResidentStore for GpuStore<'_> {
     fn bytes_for(&self, patch: &PatchData) -> u64 {
         patch_gpu_bytes(patch)
     }
+    fn estimate_bytes(&self, vertices: u32, triangles: u32) -> u64 {
+        u64::from(vertices) * VERTEX_BYTES + u64::from(triangles) * 3 * INDEX_BYTES
+    }
+    fn has_room(&self, patches: &[&PatchData]) -> bool {
+        let nv = patches.iter().map(|p| p.positions.len() as u64).sum();
+        let ni = patches.iter().map(|p| p.indices.len() as u64).sum();
+        self.cache.has_room(nv, ni)
+    }
     fn upload(&mut self, node: u32, patch: &PatchData) -> Result<u64, StoreError> {
-        self.cache
-            .upload(self.device, self.queue, node, patch, self.quant_step)
+        self.cache.upload_for(
+            self.device,
+            self.queue,
+            self.model,
+            node,
+            patch,
+            self.quant_step,
+        )
     }
     fn evict(&mut self, node: u32) {
-        self.cache.evict(node);
+        self.cache.evict_of(self.model, node);
     }
+    /// This model's bytes.
     fn resident_bytes(&self) -> u64 {
-        self.cache.stats().resident_bytes
+        self.cache.model_stats(self.model).resident_bytes
     }
     fn flush(&mut self) {
         // Submitting nothing hands the staged writes to the device and frees their

@@ -5,6 +5,11 @@
 //! Data flow per progressive frame: `tessera_stream::Scheduler::frame` selects over what
 //! the GPU holds, asks the `tessera_page::Pager` for missing groups (visible first, then
 //! the prefetch set) and uploads finished groups into the [`GpuCache`] → one render pass.
+//!
+//! A scene of several models (`Viewer::with_models`) keeps one scheduler and pager per
+//! model over one shared cache, one GPU budget and one RAM budget, split every frame
+//! by each view's demand (`tessera_stream::BudgetSplit`), and draws every model in its
+//! own local frame into one pass and one depth buffer.
 
 mod cache;
 mod gpu;
@@ -14,7 +19,8 @@ mod viewer;
 pub use cache::{GpuCache, GpuCacheStats, GpuStore, GpuVertex, Slot};
 pub use gpu::Gpu;
 pub use renderer::{
-    clip_planes, instance_tag, ColorMode, FrameParams, Light, Renderer, Shading, PATCH_SHADER,
+    clip_planes, clip_planes_along, instance_tag, ColorMode, FrameParams, Light, Renderer, Shading,
+    PATCH_SHADER,
 };
 pub use tessera_image::{diff_stats, enclosed_background_pixels, psnr, Image, ImageError};
 pub use viewer::{FrameStats, Mode, Viewer, ViewerOptions};

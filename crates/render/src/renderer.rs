@@ -2,6 +2,12 @@
 //! when the size changes), and a per-frame pass that draws a list of cached patches.
 //! [`Renderer::encode_pass`] takes any colour view of [`Renderer::color_format`], so a
 //! window surface's texture is drawn the same way as the offscreen target.
+//!
+//! Several models in one frame: each has its own local frame, so its own uniforms
+//! (view-projection relative to its cube origin, whether it has colours). They live in
+//! one uniform buffer, one entry per model at a 256-byte aligned stride, selected per
+//! draw with a dynamic offset (core WebGPU and WebGL2, no extra feature), and every
+//! model is drawn in the same pass against one depth buffer.
 
 use glam::{DVec3, Mat4};
 use tessera_select::Camera;
@@ -108,6 +114,29 @@ pub fn clip_planes(eye: DVec3, spheres: impl IntoIterator<Item = (DVec3, f64)>) 
     (near, far)
 }
 
+/// [`clip_planes`] measured along the view direction `forward` (unit), as the depth
+/// buffer measures: a sphere off the view axis at distance `d` reaches the view depth
+/// `(c - eye) . forward - r`, less than `d - r`, so planes from distances alone clip the
+/// near side of whatever is off axis (a model beside another, the edge of a close-up).
+pub fn clip_planes_along(
+    eye: DVec3,
+    forward: DVec3,
+    spheres: impl IntoIterator<Item = (DVec3, f64)>,
+) -> (f64, f64) {
+    let (mut near, mut far) = (f64::INFINITY, 0.0f64);
+    for (c, r) in spheres {
+        let z = (c - eye).dot(forward);
+        far = far.max(z + r);
+        near = near.min(z - r);
+    }
+    if far <= 0.0 || !far.is_finite() {
+        return (1e-6, 1.0);
+    }
+    let far = far * 1.01;
+    let near = (near * 0.99).max(far * 1e-6);
+    (near, far)
+}
+
 impl FrameParams {
     /// Matrices for `camera` in the local frame of a model with `cube_origin`, with near
     /// and far planes fitted around `bounds` (the model's bounding sphere, model
@@ -162,6 +191,11 @@ pub struct Renderer {
     wireframe: std::cell::Cell<bool>,
     uniform: wgpu::Buffer,
     bind_group: wgpu::BindGroup,
+    bind_group_layout: wgpu::BindGroupLayout,
+    /// Entries the uniform buffer holds (one per model).
+    entries: u32,
+    /// Bytes between entries (the device's uniform offset alignment, at least the size).
+    stride: u64,
     color_format: wgpu::TextureFormat,
     targets: Option<Targets>,
     /// Clear colour (linear RGBA).
@@ -196,7 +230,7 @@ impl Renderer {
                 visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
                 ty: wgpu::BindingType::Buffer {
                     ty: wgpu::BufferBindingType::Uniform,
-                    has_dynamic_offset: false,
+                    has_dynamic_offset: true,
                     min_binding_size: wgpu::BufferSize::new(
                         std::mem::size_of::<FrameUniform>() as u64
                     ),
@@ -276,30 +310,59 @@ impl Renderer {
                     },
                 )
             });
-        let uniform = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("tessera frame uniforms"),
-            size: std::mem::size_of::<FrameUniform>() as u64,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("tessera frame uniforms bind group"),
-            layout: &bgl,
-            entries: &[wgpu::BindGroupEntry {
-                binding: 0,
-                resource: uniform.as_entire_binding(),
-            }],
-        });
+        let align = u64::from(device.limits().min_uniform_buffer_offset_alignment).max(1);
+        let stride = (std::mem::size_of::<FrameUniform>() as u64).next_multiple_of(align);
+        let (uniform, bind_group) = Self::make_uniforms(device, &bgl, stride, 1);
         Renderer {
             pipeline,
             wire_pipeline,
             wireframe: std::cell::Cell::new(false),
             uniform,
             bind_group,
+            bind_group_layout: bgl,
+            entries: 1,
+            stride,
             color_format,
             targets: None,
             background: [0.06, 0.07, 0.09, 1.0],
             has_colors: false,
+        }
+    }
+
+    fn make_uniforms(
+        device: &wgpu::Device,
+        layout: &wgpu::BindGroupLayout,
+        stride: u64,
+        entries: u32,
+    ) -> (wgpu::Buffer, wgpu::BindGroup) {
+        let uniform = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("tessera frame uniforms"),
+            size: stride * u64::from(entries.max(1)),
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("tessera frame uniforms bind group"),
+            layout,
+            entries: &[wgpu::BindGroupEntry {
+                binding: 0,
+                resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                    buffer: &uniform,
+                    offset: 0,
+                    size: wgpu::BufferSize::new(std::mem::size_of::<FrameUniform>() as u64),
+                }),
+            }],
+        });
+        (uniform, bind_group)
+    }
+
+    /// Makes room for `models` uniform entries (one per model drawn in a frame).
+    pub fn ensure_models(&mut self, device: &wgpu::Device, models: u32) {
+        if models > self.entries {
+            let (u, b) = Self::make_uniforms(device, &self.bind_group_layout, self.stride, models);
+            self.uniform = u;
+            self.bind_group = b;
+            self.entries = models;
         }
     }
 
@@ -371,6 +434,20 @@ impl Renderer {
 
     /// Writes the frame uniforms (call before encoding the frame's passes).
     pub fn set_frame(&self, queue: &wgpu::Queue, p: &FrameParams) {
+        self.set_model_frame(queue, 0, p, self.has_colors);
+    }
+
+    /// Writes the uniforms of entry `model` (see [`Renderer::ensure_models`]): `p` in
+    /// that model's local frame, `has_colors` its vertex colours. The shading and the
+    /// wireframe switch are the frame's (the last call's).
+    pub fn set_model_frame(
+        &self,
+        queue: &wgpu::Queue,
+        model: u32,
+        p: &FrameParams,
+        has_colors: bool,
+    ) {
+        assert!(model < self.entries, "uniform entry {model} not made");
         self.wireframe.set(p.shading.wireframe);
         let color_mode = match p.shading.color_mode {
             ColorMode::Natural => 0.0,
@@ -384,7 +461,7 @@ impl Renderer {
                 p.sky_up[0],
                 p.sky_up[1],
                 p.sky_up[2],
-                if self.has_colors { 1.0 } else { 0.0 },
+                if has_colors { 1.0 } else { 0.0 },
             ],
             clay: [0.78, 0.74, 0.68, 1.0],
             mode: [
@@ -394,7 +471,11 @@ impl Renderer {
                 0.0,
             ],
         };
-        queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&u));
+        queue.write_buffer(
+            &self.uniform,
+            u64::from(model) * self.stride,
+            bytemuck::bytes_of(&u),
+        );
     }
 
     /// Encodes one pass drawing `slots` from `cache` into `color`/`depth`; clears both
@@ -407,6 +488,28 @@ impl Renderer {
         depth: &wgpu::TextureView,
         cache: &GpuCache,
         slots: impl Iterator<Item = (u32, &'a Slot)> + Clone,
+        clear: bool,
+    ) {
+        self.encode_models_pass(
+            encoder,
+            color,
+            depth,
+            cache,
+            slots.map(|(tag, s)| (0, tag, s)),
+            clear,
+        );
+    }
+
+    /// [`Renderer::encode_pass`] for several models: each slot comes with its model's
+    /// uniform entry (written by [`Renderer::set_model_frame`]) and its tag; slots of
+    /// one model should come together (the entry is rebound when it changes).
+    pub fn encode_models_pass<'a>(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        color: &wgpu::TextureView,
+        depth: &wgpu::TextureView,
+        cache: &GpuCache,
+        slots: impl Iterator<Item = (u32, u32, &'a Slot)> + Clone,
         clear: bool,
     ) {
         let [r, g, b, a] = self.background;
@@ -442,22 +545,26 @@ impl Renderer {
             multiview_mask: None,
         });
         pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, &self.bind_group, &[]);
         pass.set_vertex_buffer(0, cache.vertex_buffer().slice(..));
         pass.set_index_buffer(cache.index_buffer().slice(..), wgpu::IndexFormat::Uint32);
-        for (tag, s) in slots.clone() {
-            if s.indices.is_empty() {
-                continue;
+        let draw = |pass: &mut wgpu::RenderPass<'_>| {
+            let mut bound = None;
+            for (model, tag, s) in slots.clone() {
+                if s.indices.is_empty() || model >= self.entries {
+                    continue;
+                }
+                if bound != Some(model) {
+                    let offset = u64::from(model) * self.stride;
+                    pass.set_bind_group(0, &self.bind_group, &[offset as u32]);
+                    bound = Some(model);
+                }
+                pass.draw_indexed(s.indices.clone(), s.vertices.start as i32, tag..tag + 1);
             }
-            pass.draw_indexed(s.indices.clone(), s.vertices.start as i32, tag..tag + 1);
-        }
+        };
+        draw(&mut pass);
         if let (true, Some(wire)) = (self.wireframe.get(), &self.wire_pipeline) {
             pass.set_pipeline(wire);
-            for (tag, s) in slots {
-                if !s.indices.is_empty() {
-                    pass.draw_indexed(s.indices.clone(), s.vertices.start as i32, tag..tag + 1);
-                }
-            }
+            draw(&mut pass);
         }
     }
 

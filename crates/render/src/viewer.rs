@@ -1,6 +1,13 @@
-//! A view of one model: the streaming core's [`Scheduler`] driving the GPU cache and
-//! the pager, one call per frame. Shared by `tessera render`, the tests and (next) the
-//! window.
+//! A view of one model, or of a scene of several: the streaming core's [`Scheduler`]
+//! (one per model) driving the GPU cache and the pager, one call per frame. Shared by
+//! `tessera render`, the tests and the window.
+//!
+//! A scene: every model keeps its own scheduler, pager and local frame; they share the
+//! device, one GPU cache (one budget, one free space), one RAM budget, one render pass
+//! and one depth buffer. Before each progressive frame the budgets are split by the
+//! models' demand (`tessera_stream::BudgetSplit`: the rule and its smoothing are
+//! explained there), so the model on screen gets the memory and one off screen or
+//! hidden keeps its pinned roots (and, while nobody else needs the room, its cache).
 //!
 //! The policy (what to draw, request, upload and evict) is all in `tessera-stream`; the
 //! viewer is the wgpu mechanics around it: the device, the GPU cache as the scheduler's
@@ -16,13 +23,13 @@ use glam::DVec3;
 use tessera_format::{ModelIndex, PatchReader, ATTR_COLORS};
 use tessera_page::{Pager, PagerOptions};
 use tessera_select::Camera;
-use tessera_stream::{CompleteError, Scheduler, SchedulerOptions};
+use tessera_stream::{BudgetSplit, CompleteError, ModelDemand, Scheduler, SchedulerOptions};
 
 pub use tessera_stream::{FrameStats, Mode};
 
 use crate::cache::{GpuCache, GpuStore};
 use crate::gpu::Gpu;
-use crate::renderer::{clip_planes, instance_tag, FrameParams, Renderer, Shading};
+use crate::renderer::{clip_planes_along, instance_tag, FrameParams, Renderer, Shading};
 use crate::RenderError;
 use tessera_image::Image;
 
@@ -34,11 +41,12 @@ pub struct ViewerOptions {
     /// Frustum and normal-cone culling.
     pub cull: bool,
     pub mode: Mode,
-    /// GPU cache budget (vertex + index buffers). Default 256 MiB.
+    /// GPU cache budget (vertex + index buffers), shared by every model of a scene.
+    /// Default 256 MiB.
     pub gpu_budget_bytes: u64,
-    /// RAM budget of decoded patches. Default 128 MiB.
+    /// RAM budget of decoded patches, shared by every model of a scene. Default 128 MiB.
     pub ram_budget_bytes: u64,
-    /// Loader threads of the pager. Default 1.
+    /// Loader threads of the pager (of each model's). Default 1.
     pub loader_threads: usize,
     /// Test hook: every patch read is delayed by this much (progressive mode).
     pub read_delay: Option<Duration>,
@@ -71,21 +79,46 @@ impl Default for ViewerOptions {
     }
 }
 
-/// See the module docs.
-pub struct Viewer {
-    gpu: Gpu,
-    renderer: Renderer,
-    cache: GpuCache,
+/// One model of a [`Viewer`]'s scene: its streaming core, its loader threads and its
+/// per-frame state. Every model has its own local frame (model coordinates minus its
+/// header's cube origin), grid and cube; all share model coordinates.
+struct SceneModel {
     model: Arc<dyn PatchReader>,
     scheduler: Scheduler,
     pager: Pager,
-    opts: ViewerOptions,
     quant_step: f64,
-    start: Instant,
+    has_colors: bool,
+    visible: bool,
     /// A thread reading more of a paged index is running.
     growing: Arc<AtomicBool>,
     /// The paged index as grown since `model.index()` was read (None: not grown).
     grown: Option<Arc<ModelIndex>>,
+    /// This model's part of the last frame.
+    stats: FrameStats,
+}
+
+impl SceneModel {
+    fn index(&self) -> &ModelIndex {
+        self.grown.as_deref().unwrap_or(self.model.index())
+    }
+
+    fn cube_origin(&self) -> [f64; 3] {
+        self.model.index().header().cube_origin
+    }
+}
+
+/// See the module docs. Several models (`Viewer::with_models`) share the device, one
+/// GPU cache (slots keyed by model and node) with one budget, one RAM budget, one
+/// render pass and one depth buffer; each keeps its own scheduler and pager, and the
+/// budgets are split between them every frame by demand (`tessera_stream::BudgetSplit`).
+pub struct Viewer {
+    gpu: Gpu,
+    renderer: Renderer,
+    cache: GpuCache,
+    models: Vec<SceneModel>,
+    split: BudgetSplit,
+    opts: ViewerOptions,
+    start: Instant,
     /// Near and far planes of the last frame.
     planes: (f64, f64),
     /// The last frame's camera (its projection unprojects the depth under a pixel).
@@ -107,54 +140,117 @@ impl Viewer {
         model: Arc<dyn PatchReader>,
         opts: ViewerOptions,
     ) -> Result<Viewer, RenderError> {
+        Self::with_models(gpu, vec![model], opts)
+    }
+
+    /// Opens a viewer on a scene of `models` (at least one), drawn together in their
+    /// model coordinates; `opts.gpu_budget_bytes` and `opts.ram_budget_bytes` are the
+    /// totals they share. Every model's roots are read and uploaded now (pinned: they
+    /// must fit the GPU budget together).
+    pub fn with_models(
+        gpu: Gpu,
+        models: Vec<Arc<dyn PatchReader>>,
+        opts: ViewerOptions,
+    ) -> Result<Viewer, RenderError> {
+        if models.is_empty() {
+            return Err(RenderError::Io("a scene needs at least one model".into()));
+        }
         let mut renderer = Renderer::new(&gpu.device, wgpu::TextureFormat::Rgba8Unorm);
         renderer.background = opts.background;
-        renderer.has_colors = model.index().header().attributes & ATTR_COLORS != 0;
+        renderer.has_colors = models[0].index().header().attributes & ATTR_COLORS != 0;
+        renderer.ensure_models(&gpu.device, models.len() as u32);
         let cache = GpuCache::new(&gpu.device, opts.gpu_budget_bytes);
-        let scheduler = Scheduler::new(
-            model.index(),
-            SchedulerOptions {
-                tolerance_px: opts.tolerance_px,
-                cull: opts.cull,
-                mode: opts.mode,
-                store_budget_bytes: opts.gpu_budget_bytes,
-                ram_budget_bytes: opts.ram_budget_bytes,
-                upload_budget_bytes: opts.upload_budget_bytes,
-                prefetch: opts.prefetch,
-                ..SchedulerOptions::default()
-            },
-        );
-        let pager = Pager::new(
-            model.clone(),
-            PagerOptions {
-                threads: opts.loader_threads,
-                read_delay: opts.read_delay,
-            },
-        );
-        let quant_step = model.index().grid().step();
+        let scene = models
+            .into_iter()
+            .map(|model| {
+                let scheduler = Scheduler::new(
+                    model.index(),
+                    SchedulerOptions {
+                        tolerance_px: opts.tolerance_px,
+                        cull: opts.cull,
+                        mode: opts.mode,
+                        store_budget_bytes: opts.gpu_budget_bytes,
+                        ram_budget_bytes: opts.ram_budget_bytes,
+                        upload_budget_bytes: opts.upload_budget_bytes,
+                        prefetch: opts.prefetch,
+                        ..SchedulerOptions::default()
+                    },
+                );
+                let pager = Pager::new(
+                    model.clone(),
+                    PagerOptions {
+                        threads: opts.loader_threads,
+                        read_delay: opts.read_delay,
+                    },
+                );
+                SceneModel {
+                    quant_step: model.index().grid().step(),
+                    has_colors: model.index().header().attributes & ATTR_COLORS != 0,
+                    model,
+                    scheduler,
+                    pager,
+                    visible: true,
+                    growing: Arc::new(AtomicBool::new(false)),
+                    grown: None,
+                    stats: FrameStats::default(),
+                }
+            })
+            .collect();
         let mut v = Viewer {
             gpu,
             renderer,
             cache,
-            model,
-            scheduler,
-            pager,
+            models: scene,
+            split: BudgetSplit::new(opts.gpu_budget_bytes, opts.ram_budget_bytes),
             opts,
-            quant_step,
             start: Instant::now(),
-            growing: Arc::new(AtomicBool::new(false)),
-            grown: None,
             planes: (0.0, 0.0),
             last_camera: None,
         };
-        let mut store = GpuStore {
-            cache: &mut v.cache,
-            device: &v.gpu.device,
-            queue: &v.gpu.queue,
-            quant_step: v.quant_step,
-        };
-        v.scheduler.load_roots(&mut v.pager, &mut store);
+        // Roots first, each model with the whole budget (they are pinned); then the
+        // first split (no demand yet: an even share of what the roots leave).
+        for i in 0..v.models.len() {
+            let (m, mut store) = v.parts(i);
+            m.scheduler.load_roots(&mut m.pager, &mut store);
+        }
+        if v.models.len() > 1 {
+            v.rebalance(0.0);
+        }
         Ok(v)
+    }
+
+    /// Model `i` and its view of the shared cache.
+    fn parts(&mut self, i: usize) -> (&mut SceneModel, GpuStore<'_>) {
+        let m = &mut self.models[i];
+        let store = GpuStore {
+            cache: &mut self.cache,
+            device: &self.gpu.device,
+            queue: &self.gpu.queue,
+            quant_step: m.quant_step,
+            model: i as u32,
+        };
+        (m, store)
+    }
+
+    /// Splits the budgets by the models' demand of their last frames (see
+    /// `tessera_stream::BudgetSplit` for the rule and its smoothing).
+    fn rebalance(&mut self, time_s: f64) {
+        let demands: Vec<ModelDemand> = self
+            .models
+            .iter()
+            .map(|m| ModelDemand {
+                wanted_bytes: if m.visible { m.stats.wanted_bytes } else { 0 },
+                pinned_bytes: m.scheduler.pinned_bytes(),
+                resident_bytes: m.scheduler.resident_bytes(),
+            })
+            .collect();
+        // Split what the cache can really hold (its two buffers may fill unevenly).
+        let usable = self.cache.usable_bytes().min(self.opts.gpu_budget_bytes);
+        self.split.set_totals(usable, self.opts.ram_budget_bytes);
+        let budgets = self.split.update(time_s, &demands);
+        for (m, &(store, ram)) in self.models.iter_mut().zip(budgets) {
+            m.scheduler.set_budgets(store, ram);
+        }
     }
 
     /// The device (e.g. to report the adapter).
@@ -162,9 +258,31 @@ impl Viewer {
         &self.gpu
     }
 
-    /// The model.
+    /// The model (the first, in a scene of several).
     pub fn model(&self) -> &Arc<dyn PatchReader> {
-        &self.model
+        &self.models[0].model
+    }
+
+    /// Number of models in the scene.
+    pub fn model_count(&self) -> usize {
+        self.models.len()
+    }
+
+    /// Model `i` of the scene.
+    pub fn model_of(&self, i: usize) -> &Arc<dyn PatchReader> {
+        &self.models[i].model
+    }
+
+    /// Shows or hides model `i` from the next frame on. A hidden model draws nothing
+    /// and asks for nothing; its demand is 0, so the other models get its memory (all
+    /// but its pinned roots) as they need it.
+    pub fn set_visible(&mut self, i: usize, visible: bool) {
+        self.models[i].visible = visible;
+    }
+
+    /// Whether model `i` is shown.
+    pub fn is_visible(&self, i: usize) -> bool {
+        self.models[i].visible
     }
 
     /// The options.
@@ -172,14 +290,30 @@ impl Viewer {
         &self.opts
     }
 
-    /// The streaming core driving this viewer.
+    /// The streaming core driving the (first) model.
     pub fn scheduler(&self) -> &Scheduler {
-        &self.scheduler
+        &self.models[0].scheduler
     }
 
-    /// Nodes drawn by the last frame.
+    /// The streaming core driving model `i`.
+    pub fn scheduler_of(&self, i: usize) -> &Scheduler {
+        &self.models[i].scheduler
+    }
+
+    /// Nodes of the (first) model drawn by the last frame.
     pub fn last_draw(&self) -> &[u32] {
-        self.scheduler.draw()
+        self.models[0].scheduler.draw()
+    }
+
+    /// Nodes of model `i` drawn by the last frame.
+    pub fn last_draw_of(&self, i: usize) -> &[u32] {
+        self.models[i].scheduler.draw()
+    }
+
+    /// Model `i`'s part of the last frame's statistics (its GPU bytes, budget, demand,
+    /// cut); [`Viewer::render_with`] returns their combination.
+    pub fn model_stats(&self, i: usize) -> &FrameStats {
+        &self.models[i].stats
     }
 
     /// Renders one frame of `camera` into the offscreen target (camera.width x
@@ -190,7 +324,13 @@ impl Viewer {
 
     /// Renders one frame: the cut is selected (and loaded) for `select`, and drawn seen
     /// from `camera` (the same camera, except while the cut is frozen: fly around and
-    /// look at what a view selected). Both must have the same size.
+    /// look at what a view selected). Both must have the same size. In a scene of
+    /// several models the statistics are combined ([`FrameStats::combined`]: counts and
+    /// bytes summed, deepest level); [`Viewer::model_stats`] has each model's.
+    ///
+    /// Complete and full-resolution frames of several models run model by model into
+    /// the same target (cleared once, one depth buffer): each model in turn gets the
+    /// whole GPU budget, the others released down to their pinned roots first.
     pub fn render_with(
         &mut self,
         select: &Camera,
@@ -199,82 +339,21 @@ impl Viewer {
         let t0 = Instant::now();
         self.renderer
             .ensure_offscreen(&self.gpu.device, camera.width, camera.height);
-        let cube_origin = self.model.index().header().cube_origin;
-        let (color, depth) = self
-            .renderer
-            .offscreen_views()
-            .ok_or(RenderError::NoFrame)?;
-        let mut store = GpuStore {
-            cache: &mut self.cache,
-            device: &self.gpu.device,
-            queue: &self.gpu.queue,
-            quant_step: self.quant_step,
-        };
+        self.renderer
+            .ensure_models(&self.gpu.device, self.models.len() as u32);
         // A paged index read further since the last frame: select over more of it.
-        if let Some(ix) = self.model.latest_index() {
-            if ix.nodes().len() > self.scheduler.node_count() {
-                self.scheduler.set_index(&ix, &mut store);
-                self.grown = Some(ix);
+        for i in 0..self.models.len() {
+            let (m, mut store) = self.parts(i);
+            if let Some(ix) = m.model.latest_index() {
+                if ix.nodes().len() > m.scheduler.node_count() {
+                    m.scheduler.set_index(&ix, &mut store);
+                    m.grown = Some(ix);
+                }
             }
         }
-        let index = self.grown.as_deref().unwrap_or(self.model.index());
         let mut stats = match self.opts.mode {
-            Mode::Progressive => {
-                let time_s = self.start.elapsed().as_secs_f64();
-                let stats = self
-                    .scheduler
-                    .frame(select, time_s, &mut self.pager, &mut store);
-                if stats.index_wants > 0 && !self.growing.swap(true, Ordering::AcqRel) {
-                    // Read more of the index off this thread; the frame never waits.
-                    let (model, growing) = (self.model.clone(), self.growing.clone());
-                    std::thread::spawn(move || {
-                        model.grow_index();
-                        growing.store(false, Ordering::Release);
-                    });
-                }
-                let nodes = self.scheduler.draw();
-                self.planes = fitted_planes(index, camera, nodes);
-                let params =
-                    FrameParams::with_planes(camera, cube_origin, self.planes, self.opts.shading);
-                self.renderer.set_frame(&self.gpu.queue, &params);
-                submit_pass(
-                    &self.gpu,
-                    &self.renderer,
-                    (color, depth),
-                    store.cache,
-                    index,
-                    nodes,
-                    true,
-                );
-                stats
-            }
-            Mode::Complete | Mode::FullResolution => {
-                // The passes of one frame share planes: fitted to the whole model
-                // (the cut is not known before it is drawn), tightened by the last
-                // frame's cut would risk clipping.
-                let h = self.model.index().header();
-                let b = h.bounding_sphere;
-                self.planes = clip_planes(
-                    DVec3::from(camera.position),
-                    [(DVec3::new(b[0], b[1], b[2]), b[3].max(1e-9))],
-                );
-                let params =
-                    FrameParams::with_planes(camera, cube_origin, self.planes, self.opts.shading);
-                self.renderer.set_frame(&self.gpu.queue, &params);
-                let (gpu, renderer) = (&self.gpu, &self.renderer);
-                self.scheduler
-                    .complete_frame(select, &mut self.pager, &mut store, |s, nodes, clear| {
-                        submit_pass(gpu, renderer, (color, depth), s.cache, index, nodes, clear);
-                        Ok::<(), RenderError>(())
-                    })
-                    .map_err(|e| match e {
-                        CompleteError::StoreTooSmall => RenderError::CacheTooSmall,
-                        CompleteError::NoBlockingReads => {
-                            RenderError::Io("the patch source cannot read on demand".into())
-                        }
-                        CompleteError::Pass(e) => e,
-                    })?
-            }
+            Mode::Progressive => self.progressive_frame(select, camera),
+            Mode::Complete | Mode::FullResolution => self.complete_frames(select, camera)?,
         };
         self.gpu.wait_idle()?;
         self.last_camera = Some(camera.clone());
@@ -282,10 +361,178 @@ impl Viewer {
         Ok(stats)
     }
 
+    fn progressive_frame(&mut self, select: &Camera, camera: &Camera) -> FrameStats {
+        let time_s = self.start.elapsed().as_secs_f64();
+        let n = self.models.len();
+        let mut order: Vec<usize> = (0..n).collect();
+        if n > 1 {
+            self.rebalance(time_s);
+            // Models over their (new) budget first: the memory they free in the
+            // shared cache is there for the others' uploads in this same frame.
+            order.sort_by_key(|&i| {
+                let s = &self.models[i].scheduler;
+                s.budgets().0 as i128 - s.resident_bytes() as i128
+            });
+        }
+        for i in order {
+            let (m, mut store) = self.parts(i);
+            m.stats = if m.visible {
+                let stats = m.scheduler.frame(select, time_s, &mut m.pager, &mut store);
+                if stats.index_wants > 0 && !m.growing.swap(true, Ordering::AcqRel) {
+                    // Read more of the index off this thread; the frame never waits.
+                    let (model, growing) = (m.model.clone(), m.growing.clone());
+                    std::thread::spawn(move || {
+                        model.grow_index();
+                        growing.store(false, Ordering::Release);
+                    });
+                }
+                stats
+            } else {
+                m.scheduler.idle_frame(&mut m.pager, &mut store)
+            };
+        }
+        self.planes = fitted_planes(
+            camera,
+            self.models.iter().map(|m| (m.index(), m.scheduler.draw())),
+        );
+        self.set_uniforms(camera);
+        let draws: Vec<(u32, &ModelIndex, &[u32])> = self
+            .models
+            .iter()
+            .enumerate()
+            .map(|(i, m)| (i as u32, m.index(), m.scheduler.draw()))
+            .collect();
+        if let Some((color, depth)) = self.renderer.offscreen_views() {
+            submit_pass(
+                &self.gpu,
+                &self.renderer,
+                (color, depth),
+                &self.cache,
+                &draws,
+                true,
+            );
+        }
+        let mut stats = FrameStats::combined(self.models.iter().map(|m| &m.stats));
+        stats.passes = 1;
+        stats
+    }
+
+    /// Every model's uniforms for `camera` with the frame's planes.
+    fn set_uniforms(&self, camera: &Camera) {
+        for (i, m) in self.models.iter().enumerate() {
+            let params =
+                FrameParams::with_planes(camera, m.cube_origin(), self.planes, self.opts.shading);
+            self.renderer
+                .set_model_frame(&self.gpu.queue, i as u32, &params, m.has_colors);
+        }
+    }
+
+    fn complete_frames(
+        &mut self,
+        select: &Camera,
+        camera: &Camera,
+    ) -> Result<FrameStats, RenderError> {
+        // The passes of one frame share planes: fitted to the whole models shown (the
+        // cut is not known before it is drawn), tightened by the last frame's cut would
+        // risk clipping.
+        let spheres: Vec<(DVec3, f64)> = self
+            .models
+            .iter()
+            .filter(|m| m.visible)
+            .map(|m| {
+                let b = m.model.index().header().bounding_sphere;
+                (DVec3::new(b[0], b[1], b[2]), b[3].max(1e-9))
+            })
+            .collect();
+        self.planes = clip_planes_along(
+            DVec3::from(camera.position),
+            camera.basis().forward,
+            spheres,
+        );
+        self.set_uniforms(camera);
+        let n = self.models.len();
+        let (total_gpu, total_ram) = (self.opts.gpu_budget_bytes, self.opts.ram_budget_bytes);
+        let mut cleared = false;
+        let mut passes = 0;
+        for i in 0..n {
+            if !self.models[i].visible {
+                self.models[i].stats = FrameStats::default();
+                continue;
+            }
+            if n > 1 {
+                // This model gets the whole cache but the others' pinned roots.
+                let mut others = 0;
+                for j in (0..n).filter(|&j| j != i) {
+                    let (m, mut store) = self.parts(j);
+                    m.scheduler.release(&mut store);
+                    others += m.scheduler.resident_bytes();
+                }
+                self.models[i]
+                    .scheduler
+                    .set_budgets(total_gpu.saturating_sub(others), total_ram);
+            }
+            let first = !cleared;
+            let Some((color, depth)) = self.renderer.offscreen_views() else {
+                return Err(RenderError::NoFrame);
+            };
+            let (gpu, renderer) = (&self.gpu, &self.renderer);
+            let m = &mut self.models[i];
+            let index = m.grown.as_deref().unwrap_or(m.model.index());
+            let mut store = GpuStore {
+                cache: &mut self.cache,
+                device: &gpu.device,
+                queue: &gpu.queue,
+                quant_step: m.quant_step,
+                model: i as u32,
+            };
+            let stats = m
+                .scheduler
+                .complete_frame(select, &mut m.pager, &mut store, |s, nodes, clear| {
+                    let draws = [(i as u32, index, nodes)];
+                    submit_pass(
+                        gpu,
+                        renderer,
+                        (color, depth),
+                        s.cache,
+                        &draws,
+                        clear && first,
+                    );
+                    Ok::<(), RenderError>(())
+                })
+                .map_err(|e| match e {
+                    CompleteError::StoreTooSmall => RenderError::CacheTooSmall,
+                    CompleteError::NoBlockingReads => {
+                        RenderError::Io("the patch source cannot read on demand".into())
+                    }
+                    CompleteError::Pass(e) => e,
+                })?;
+            cleared = true;
+            passes += stats.passes;
+            m.stats = stats;
+        }
+        if !cleared {
+            // Nothing shown: a cleared frame.
+            if let Some((color, depth)) = self.renderer.offscreen_views() {
+                submit_pass(
+                    &self.gpu,
+                    &self.renderer,
+                    (color, depth),
+                    &self.cache,
+                    &[],
+                    true,
+                );
+            }
+        }
+        let mut stats = FrameStats::combined(self.models.iter().map(|m| &m.stats));
+        stats.passes = passes;
+        Ok(stats)
+    }
+
     /// The surface point drawn at pixel (`x`, `y`) of the last frame (pixels from the
     /// top left), model coordinates, from the depth buffer: a point on whatever level
-    /// was drawn (for zooming toward the cursor; a full-resolution pick is
-    /// `tessera-pick`'s). None over the background. Waits for the GPU.
+    /// was drawn, of whichever model is in front (for zooming toward the cursor; a
+    /// full-resolution pick is `tessera-pick`'s). None over the background. Waits for
+    /// the GPU.
     pub fn point_at(&self, x: f64, y: f64) -> Result<Option<[f64; 3]>, RenderError> {
         let Some(cam) = &self.last_camera else {
             return Ok(None);
@@ -321,30 +568,54 @@ impl Viewer {
         self.renderer.offscreen_color()
     }
 
-    /// The pager's counters (bytes read, loads, queue).
+    /// The pagers' counters (bytes read, loads, queue), summed over the models.
     pub fn pager_stats(&self) -> tessera_page::PagerStats {
-        self.pager.stats()
+        let mut out = tessera_page::PagerStats::default();
+        for m in &self.models {
+            let s = m.pager.stats();
+            out.queued += s.queued;
+            out.in_flight += s.in_flight;
+            out.loads += s.loads;
+            out.failures += s.failures;
+            out.bytes_read += s.bytes_read;
+        }
+        out
     }
 
-    /// Near and far planes of the last frame (model units).
+    /// Model `i`'s pager counters.
+    pub fn pager_stats_of(&self, i: usize) -> tessera_page::PagerStats {
+        self.models[i].pager.stats()
+    }
+
+    /// Near and far planes of the last frame (model units; shared by every model).
     pub fn clip_planes(&self) -> (f64, f64) {
         self.planes
     }
 
-    /// The index the scheduler selects over (grown from a paged one, if it was).
+    /// The index the (first) model's scheduler selects over (grown from a paged one,
+    /// if it was).
     pub fn index(&self) -> &ModelIndex {
-        self.grown.as_deref().unwrap_or(self.model.index())
+        self.models[0].index()
     }
 
-    /// Changes the screen-space tolerance (pixels) from the next frame on.
+    /// The index model `i`'s scheduler selects over.
+    pub fn index_of(&self, i: usize) -> &ModelIndex {
+        self.models[i].index()
+    }
+
+    /// Changes the screen-space tolerance (pixels) of every model from the next frame on.
     pub fn set_tolerance_px(&mut self, tolerance_px: f32) {
-        self.scheduler.set_tolerance_px(tolerance_px);
-        self.opts.tolerance_px = self.scheduler.options().tolerance_px;
+        for m in &mut self.models {
+            m.scheduler.set_tolerance_px(tolerance_px);
+        }
+        self.opts.tolerance_px = self.models[0].scheduler.options().tolerance_px;
     }
 
     /// Turns the prefetch set on or off from the next frame on.
     pub fn set_prefetch(&mut self, prefetch: bool) {
-        self.scheduler.set_prefetch(prefetch);
+        for m in &mut self.models {
+            m.scheduler.set_prefetch(prefetch);
+        }
         self.opts.prefetch = prefetch;
     }
 
@@ -365,31 +636,49 @@ impl Viewer {
     }
 }
 
-/// Near and far planes fitted to the tight spheres of the `nodes` drawn (a close-up
-/// gets a near plane just in front of the surface it looks at).
-fn fitted_planes(index: &ModelIndex, camera: &Camera, nodes: &[u32]) -> (f64, f64) {
-    let origin = DVec3::from(index.header().cube_origin);
-    let spheres = nodes.iter().filter_map(|&n| {
-        let s = index.nodes().get(n as usize)?.tight_sphere;
-        let c = origin + DVec3::new(f64::from(s[0]), f64::from(s[1]), f64::from(s[2]));
-        // f32 spheres: widen by their rounding.
-        Some((
-            c,
-            f64::from(s[3]) * (1.0 + 1e-6) + c.abs().max_element() * 1e-6,
-        ))
-    });
-    clip_planes(DVec3::from(camera.position), spheres)
+/// Near and far planes fitted to the tight spheres of the nodes drawn, of every model
+/// (each index with its drawn nodes; spheres taken to model coordinates through each
+/// model's cube origin): a close-up gets a near plane just in front of the surface it
+/// looks at, and one depth buffer serves the whole scene.
+fn fitted_planes<'a>(
+    camera: &Camera,
+    models: impl Iterator<Item = (&'a ModelIndex, &'a [u32])>,
+) -> (f64, f64) {
+    let mut spheres = Vec::new();
+    for (index, nodes) in models {
+        let origin = DVec3::from(index.header().cube_origin);
+        spheres.extend(nodes.iter().filter_map(|&n| {
+            let s = index.nodes().get(n as usize)?.tight_sphere;
+            let c = origin + DVec3::new(f64::from(s[0]), f64::from(s[1]), f64::from(s[2]));
+            // f32 spheres: widen by their rounding.
+            Some((
+                c,
+                f64::from(s[3]) * (1.0 + 1e-6) + c.abs().max_element() * 1e-6,
+            ))
+        }));
+    }
+    clip_planes_along(
+        DVec3::from(camera.position),
+        camera.basis().forward,
+        spheres,
+    )
 }
 
-/// Encodes and submits one render pass drawing the resident `nodes` into the offscreen
-/// target; `clear` starts the frame, otherwise the pass adds to what is there.
+/// The instance tag of `node` of model `model` (models other than the first get their
+/// ids scrambled, so "colour by node" tells their patches apart).
+fn model_tag(model: u32, node: u32, level: u8) -> u32 {
+    instance_tag(node ^ model.wrapping_mul(0x9E_3779), level)
+}
+
+/// Encodes and submits one render pass drawing the resident nodes of each (model,
+/// index, nodes) into the offscreen target; `clear` starts the frame, otherwise the
+/// pass adds to what is there.
 fn submit_pass(
     gpu: &Gpu,
     renderer: &Renderer,
     (color, depth): (&wgpu::TextureView, &wgpu::TextureView),
     cache: &GpuCache,
-    index: &ModelIndex,
-    nodes: &[u32],
+    draws: &[(u32, &ModelIndex, &[u32])],
     clear: bool,
 ) {
     let mut enc = gpu
@@ -397,10 +686,14 @@ fn submit_pass(
         .create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("tessera frame encoder"),
         });
-    let slots = nodes.iter().filter_map(|&n| {
-        let level = index.nodes().get(n as usize).map_or(0, |r| r.level);
-        cache.slot(n).map(|s| (instance_tag(n, level), s))
+    let slots = draws.iter().flat_map(|&(model, index, nodes)| {
+        nodes.iter().filter_map(move |&n| {
+            let level = index.nodes().get(n as usize).map_or(0, |r| r.level);
+            cache
+                .slot_of(model, n)
+                .map(|s| (model, model_tag(model, n, level), s))
+        })
     });
-    renderer.encode_pass(&mut enc, color, depth, cache, slots, clear);
+    renderer.encode_models_pass(&mut enc, color, depth, cache, slots, clear);
     gpu.queue.submit([enc.finish()]);
 }

@@ -13,6 +13,10 @@
 //! - a [`ResidentStore`]: upload a patch, evict it, report bytes; `tessera-render`'s GPU
 //!   cache, or an in-memory fake in the tests.
 //!
+//! Several models in one scene keep one scheduler each and share one store budget and
+//! one RAM budget: a [`BudgetSplit`] turns each model's per-frame demand
+//! ([`FrameStats::wanted_bytes`]) into its budgets ([`Scheduler::set_budgets`]).
+//!
 //! Both caches the scheduler keeps (decoded patches in RAM, groups in the store) use one
 //! [`Lru`] type under a byte budget, with one frame counter for recency.
 
@@ -20,6 +24,7 @@ mod groups;
 mod lru;
 mod scheduler;
 mod source;
+mod split;
 mod store;
 
 pub use groups::Groups;
@@ -29,4 +34,5 @@ pub use scheduler::{
     SchedulerOptions, MAX_UPLOAD_ROUNDS, PREFETCH_GROWTH, UNLOAD_GROWTH,
 };
 pub use source::{Answer, PatchSource};
+pub use split::{BudgetSplit, ModelDemand, DEAD_BAND_DIVISOR, DEMAND_HALF_LIFE_S};
 pub use store::{CountingStore, ResidentStore, StoreError};

@@ -60,6 +60,27 @@ impl<V> Lru<V> {
         self.bytes
     }
 
+    /// Changes the budget. Nothing is removed here: the caller makes room when it sees
+    /// fit ([`Lru::shrink`], or victims one by one), so entries still in use survive.
+    pub fn set_budget(&mut self, budget: u64) {
+        self.budget = budget;
+    }
+
+    /// Whether the entries exceed the budget (after it was lowered).
+    pub fn over_budget(&self) -> bool {
+        self.bytes > self.budget
+    }
+
+    /// Bytes of `key`'s entry.
+    pub fn bytes_of(&self, key: u32) -> Option<u64> {
+        self.entries.get(&key).map(|e| e.bytes)
+    }
+
+    /// Keys of entries used at or after `frame`, oldest first (not pinned ones).
+    pub fn used_since(&self, frame: u64) -> Vec<u32> {
+        self.order.range((frame, 0)..).map(|&(_, k)| k).collect()
+    }
+
     /// Number of entries.
     pub fn len(&self) -> usize {
         self.entries.len()
@@ -182,6 +203,12 @@ impl<V> Lru<V> {
             }
         }
         out
+    }
+
+    /// Removes least recently used entries last used before `keep_since` until the
+    /// entries fit the budget (after [`Lru::set_budget`] lowered it), returning them.
+    pub fn shrink(&mut self, keep_since: u64) -> Vec<(u32, V)> {
+        self.make_room(0, keep_since)
     }
 
     /// Admits a new entry after [`Lru::make_room`]: when it still does not fit it is

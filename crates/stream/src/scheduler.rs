@@ -156,6 +156,44 @@ pub struct FrameStats {
     /// index read so far: the front end should read more of the index
     /// ([`Scheduler::set_index`] then takes it).
     pub index_wants: usize,
+    /// The view's demand: store bytes of the groups its whole cut needs (the cut drawn
+    /// if everything were resident, with the groups it depends on), resident or not;
+    /// what this view would hold with an unlimited budget. A progressive frame measures
+    /// it; a front end sharing one budget between models splits by it. 0 for a frame
+    /// that draws nothing (hidden, or nothing in view).
+    pub wanted_bytes: u64,
+    /// The store budget this frame ran under ([`Scheduler::set_budgets`]).
+    pub gpu_budget_bytes: u64,
+}
+
+impl FrameStats {
+    /// The statistics of several models' frames drawn as one (a scene): counts, bytes
+    /// and times summed, the deepest level, the largest frame number and pass count.
+    pub fn combined<'a>(parts: impl IntoIterator<Item = &'a FrameStats>) -> FrameStats {
+        let mut out = FrameStats::default();
+        for s in parts {
+            out.frame = out.frame.max(s.frame);
+            out.selected_nodes += s.selected_nodes;
+            out.triangles += s.triangles;
+            out.max_level = out.max_level.max(s.max_level);
+            out.bytes_uploaded += s.bytes_uploaded;
+            out.patches_uploaded += s.patches_uploaded;
+            out.cache_hits += s.cache_hits;
+            out.cache_misses += s.cache_misses;
+            out.pending_loads += s.pending_loads;
+            out.failed_patches += s.failed_patches;
+            out.selection_ms += s.selection_ms;
+            out.frame_ms = out.frame_ms.max(s.frame_ms);
+            out.passes = out.passes.max(s.passes);
+            out.gpu_resident_bytes += s.gpu_resident_bytes;
+            out.gpu_evictions += s.gpu_evictions;
+            out.ram_resident_bytes += s.ram_resident_bytes;
+            out.index_wants += s.index_wants;
+            out.wanted_bytes += s.wanted_bytes;
+            out.gpu_budget_bytes += s.gpu_budget_bytes;
+        }
+        out
+    }
 }
 
 /// Why a complete frame could not be drawn.
@@ -173,6 +211,7 @@ pub enum CompleteError<E> {
 #[derive(Clone, Copy)]
 struct NodeFacts {
     triangles: u32,
+    vertices: u32,
     level: u8,
 }
 
@@ -208,6 +247,8 @@ pub struct Scheduler {
     reported: Option<f64>,
     unreported: u64,
     sel: Selection,
+    /// The whole cut of the last view (as if everything were resident): its demand.
+    demand: Selection,
     prefetch: Vec<(u32, f32)>,
     prev_camera: Option<(Camera, f64)>,
     answers: Vec<Answer>,
@@ -349,6 +390,7 @@ impl Scheduler {
             reported: None,
             unreported: 0,
             sel: Selection::default(),
+            demand: Selection::default(),
             prefetch: Vec::new(),
             prev_camera: None,
             answers: Vec::new(),
@@ -364,6 +406,7 @@ impl Scheduler {
             .iter()
             .map(|n| NodeFacts {
                 triangles: n.triangle_count,
+                vertices: n.vertex_count,
                 level: n.level,
             })
             .collect();
@@ -431,6 +474,177 @@ impl Scheduler {
     /// Turns asking for the prefetch set on or off from the next frame on.
     pub fn set_prefetch(&mut self, prefetch: bool) {
         self.opts.prefetch = prefetch;
+    }
+
+    /// Changes the store and RAM budgets (a front end sharing one budget between
+    /// models, [`crate::BudgetSplit`]). Raising one takes effect at once; lowering one
+    /// evicts down to it at the start of the next frame ([`Scheduler::frame`] or
+    /// [`Scheduler::idle_frame`]): first, least recently used first, the groups the
+    /// previous frame did not use (those even a closer view would not need before the
+    /// others, as for any eviction), then, if still over, the groups the previous
+    /// frame drew, the least important on screen first (the cut coarsens from its
+    /// finest, farthest diamonds; never a group before the groups that depend on it).
+    /// Pinned roots are never evicted: a budget below them leaves the store over it.
+    pub fn set_budgets(&mut self, store_budget_bytes: u64, ram_budget_bytes: u64) {
+        self.opts.store_budget_bytes = store_budget_bytes;
+        self.opts.ram_budget_bytes = ram_budget_bytes;
+        self.res.lru.set_budget(store_budget_bytes);
+        self.ram.set_budget(ram_budget_bytes);
+    }
+
+    /// The store and RAM budgets in effect.
+    pub fn budgets(&self) -> (u64, u64) {
+        (self.opts.store_budget_bytes, self.opts.ram_budget_bytes)
+    }
+
+    /// Store bytes of the groups this scheduler holds (what its store budget counts).
+    pub fn resident_bytes(&self) -> u64 {
+        self.res.lru.bytes()
+    }
+
+    /// Store bytes of the pinned roots (never evicted: the least a budget must allow).
+    pub fn pinned_bytes(&self) -> u64 {
+        let mut seen = FxHashSet::default();
+        (0..self.nv.root_count())
+            .map(|r| self.groups.of(r))
+            .filter(|&g| seen.insert(g) && self.res.lru.last_used(g) == Some(u64::MAX))
+            .filter_map(|g| self.res.lru.bytes_of(g))
+            .sum()
+    }
+
+    /// Evicts down to the budgets after [`Scheduler::set_budgets`] lowered them, at the
+    /// start of a frame (see there); `view`: this frame's view (None: not shown).
+    fn evict_to_budget<R: ResidentStore + ?Sized>(
+        &mut self,
+        view: Option<&ViewParams>,
+        store: &mut R,
+    ) {
+        let frame = self.frame;
+        // RAM: patches touched by the previous frame stay (groups waiting for siblings).
+        if self.ram.over_budget() {
+            self.ram.shrink(frame.saturating_sub(1));
+        }
+        if !self.res.lru.over_budget() {
+            return;
+        }
+        let (nv, groups) = (&self.nv, &self.groups);
+        // 1. The normal order: groups the previous frame did not use, least recently
+        //    used first, preferring those even a view with spheres grown by
+        //    UNLOAD_GROWTH would not need.
+        let unloadable = |h: u32| match view {
+            Some(view) => groups
+                .members(h)
+                .iter()
+                .all(|&x| should_unload(nv, x, view, UNLOAD_GROWTH)),
+            None => false,
+        };
+        let keep = frame.saturating_sub(1);
+        while self.res.lru.over_budget() {
+            if !self.res.evict_one(groups, store, keep, &unloadable) {
+                break;
+            }
+        }
+        if !self.res.lru.over_budget() {
+            return;
+        }
+        // 2. Still over: coarsen the previous frame's cut. A group (the children of a
+        //    diamond D) costs the screen the projected error of D, which bounds that of
+        //    every group depending on it (errors and saturated spheres only shrink down
+        //    the hierarchy), so evicting the smallest first never strands a dependent;
+        //    equal ones go finest (largest id) first. This runs before selection, so
+        //    the frame draws the coarser cut and nothing it draws is evicted.
+        let mut cut: Vec<(f32, u32)> = self
+            .res
+            .lru
+            .used_since(keep)
+            .into_iter()
+            .map(|g| {
+                let pri = match (view, groups.members(g).first()) {
+                    (Some(view), Some(&m)) => {
+                        let p = nv.nodes()[m as usize].parent;
+                        if p == NO_NODE {
+                            f32::INFINITY
+                        } else {
+                            let d = &nv.nodes()[p as usize];
+                            projected_error(view, d.error, d.saturated_sphere)
+                        }
+                    }
+                    _ => 0.0,
+                };
+                (pri, g)
+            })
+            .collect();
+        cut.sort_by(|a, b| a.0.total_cmp(&b.0).then(b.1.cmp(&a.1)));
+        for (_, g) in cut {
+            if !self.res.lru.over_budget() {
+                break;
+            }
+            self.res.evict_group(groups, store, g);
+        }
+    }
+
+    /// Evicts every group but the pinned roots now (a model hidden, or making room for
+    /// another model's complete frame in a shared store).
+    pub fn release<R: ResidentStore + ?Sized>(&mut self, store: &mut R) {
+        self.res.evict_unused(&self.groups, store, u64::MAX);
+    }
+
+    /// A frame of a model that is not shown: nothing is drawn or asked for (the
+    /// source's wants are cancelled), answers still arriving go to the RAM cache, and
+    /// the store is evicted down to its budget as [`Scheduler::frame`] would (every
+    /// group is unused now). Demand 0.
+    pub fn idle_frame<S, R>(&mut self, source: &mut S, store: &mut R) -> FrameStats
+    where
+        S: PatchSource + ?Sized,
+        R: ResidentStore + ?Sized,
+    {
+        self.frame += 1;
+        self.collect(source);
+        self.evict_to_budget(None, store);
+        self.sel.draw.clear();
+        self.sel.missing.clear();
+        self.demand.draw.clear();
+        self.prefetch.clear();
+        source.request(&[]);
+        self.prev_camera = None;
+        let mut stats = FrameStats {
+            pending_loads: source.pending(),
+            ..FrameStats::default()
+        };
+        self.finish_stats(&mut stats, store);
+        stats
+    }
+
+    /// The view's demand ([`FrameStats::wanted_bytes`]): the whole cut for `view` (failed
+    /// groups excepted) and the closure of the groups it needs, in the store's bytes.
+    fn wanted_bytes<R: ResidentStore + ?Sized>(&mut self, view: &ViewParams, store: &R) -> u64 {
+        let (groups, failed) = (&self.groups, &self.failed);
+        let ok = |n: u32| failed.is_empty() || !group_failed(groups, failed, groups.of(n));
+        select_resident(&self.nv, view, &ok, &mut self.demand);
+        self.epoch += 1;
+        let stamp = self.epoch;
+        let mut bytes = 0u64;
+        let mut stack: Vec<u32> = Vec::new();
+        for &n in &self.demand.draw {
+            stack.push(self.groups.of(n));
+            while let Some(g) = stack.pop() {
+                if self.visit[g as usize] == stamp {
+                    continue;
+                }
+                self.visit[g as usize] = stamp;
+                bytes += self
+                    .groups
+                    .members(g)
+                    .iter()
+                    .map(|&m| {
+                        let f = self.facts[m as usize];
+                        store.estimate_bytes(f.vertices, f.triangles)
+                    })
+                    .sum::<u64>();
+                stack.extend_from_slice(self.groups.dependencies(g));
+            }
+        }
+        bytes
     }
 
     /// The residency groups.
@@ -661,6 +875,7 @@ impl Scheduler {
         let mut stats = FrameStats::default();
         self.collect(source);
         let view = self.view_params(camera);
+        self.evict_to_budget(Some(&view), store);
         let ts = clock();
         self.select_resident_now(&view);
         let draw_before: FxHashSet<u32> = self.sel.draw.iter().copied().collect();
@@ -689,6 +904,7 @@ impl Scheduler {
         } else {
             self.prefetch.clear();
         }
+        stats.wanted_bytes = self.wanted_bytes(&view, store);
         stats.selection_ms = clock() - ts;
 
         // Upload finished groups, most urgent first, within the byte budget; then select
@@ -739,6 +955,27 @@ impl Scheduler {
                 if !all || (size > budget && stats.patches_uploaded > 0) {
                     continue;
                 }
+                // A group is uploaded whole or not at all: room for all of it first (a
+                // partly uploaded group is unusable, unused, so evicted next frame,
+                // then uploaded again: churn), within the budget and the store. One
+                // larger than the whole budget is skipped (a shared budget may grow).
+                if size > self.res.lru.budget() {
+                    continue;
+                }
+                let refs: Vec<&PatchData> = patches.iter().map(|(_, p)| p.as_ref()).collect();
+                let mut room = true;
+                while room && (self.res.lru.would_exceed(size) || !store.has_room(&refs)) {
+                    room = self.res.evict_one(groups, store, frame, &unloadable);
+                }
+                if !room {
+                    // Full of groups in use: the less urgent groups after this one
+                    // wait too, or they would take the room this one waits for (a
+                    // budget that grows, in a scene, would fill with whatever is
+                    // small instead of what matters most). At most this group's bytes
+                    // stay unused.
+                    break;
+                }
+                let mut whole = true;
                 for (m, p) in &patches {
                     let key = (*m, g, nv.nodes()[*m as usize].parent == NO_NODE);
                     match self.res.upload(groups, store, frame, key, p, &unloadable) {
@@ -747,12 +984,20 @@ impl Scheduler {
                             stats.bytes_uploaded += b;
                             stats.patches_uploaded += 1;
                         }
-                        Err(StoreError::Full) => break,
+                        Err(StoreError::Full) => {
+                            whole = false;
+                            break;
+                        }
                         Err(StoreError::TooBig) => {
                             tracing::warn!(node = m, "patch larger than the store, skipped");
                             self.failed.insert(*m);
                         }
                     }
+                }
+                if !whole {
+                    // The store was full after all (fragmentation): take the part back.
+                    self.res.evict_group(groups, store, g);
+                    continue;
                 }
                 // Keep the group from being evicted by later uploads of this frame.
                 self.res.lru.touch(g, frame);
@@ -949,6 +1194,7 @@ impl Scheduler {
 
     fn finish_stats<R: ResidentStore + ?Sized>(&self, stats: &mut FrameStats, store: &R) {
         stats.frame = self.frame;
+        stats.gpu_budget_bytes = self.opts.store_budget_bytes;
         stats.failed_patches = self.failed.len();
         stats.gpu_resident_bytes = store.resident_bytes();
         stats.gpu_evictions = self.res.evictions;
@@ -967,6 +1213,19 @@ impl Scheduler {
             .map(|&n| self.facts[n as usize].level)
             .max()
             .unwrap_or(0);
+    }
+}
+
+/// Pixels the model-space `error` of a node with saturated sphere `sphere` projects to
+/// from `view` (infinite from inside the sphere).
+fn projected_error(view: &ViewParams, error: f32, sphere: [f32; 4]) -> f32 {
+    let e = view.eye;
+    let (dx, dy, dz) = (sphere[0] - e.x, sphere[1] - e.y, sphere[2] - e.z);
+    let d = (dx * dx + dy * dy + dz * dz).sqrt() - sphere[3];
+    if d <= 0.0 {
+        f32::INFINITY
+    } else {
+        error * view.px_per_unit / d
     }
 }
 

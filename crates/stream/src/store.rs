@@ -21,6 +21,22 @@ pub enum StoreError {
 pub trait ResidentStore {
     /// Bytes `patch` would take once uploaded (what the scheduler's budget counts).
     fn bytes_for(&self, patch: &PatchData) -> u64;
+    /// Bytes a patch of `vertices` vertices and `triangles` triangles would take, from
+    /// the index alone (the demand of a view, [`crate::FrameStats::wanted_bytes`], counts
+    /// patches not loaded yet). Default: 24 bytes a vertex and 4 an index, as the GPU
+    /// cache and [`CountingStore`] count.
+    fn estimate_bytes(&self, vertices: u32, triangles: u32) -> u64 {
+        u64::from(vertices) * 24 + u64::from(triangles) * 12
+    }
+    /// Whether `patches` (one residency group) would fit now, together: the scheduler
+    /// uploads a group whole or not at all, and makes room (evicts) before it starts.
+    /// A store whose space is not one pool (a GPU cache's vertex and index buffers)
+    /// can be full before the scheduler's byte budget is reached. Default: true (the
+    /// upload itself answers [`StoreError::Full`]).
+    fn has_room(&self, patches: &[&PatchData]) -> bool {
+        let _ = patches;
+        true
+    }
     /// Makes `node`'s patch resident; returns the bytes it takes.
     fn upload(&mut self, node: u32, patch: &PatchData) -> Result<u64, StoreError>;
     /// Frees `node`'s patch (nothing if not resident).
