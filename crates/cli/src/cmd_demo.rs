@@ -130,8 +130,8 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         },
     )?;
     let mut triangles = 0;
-    for (i, cam) in orbit.cameras().iter().enumerate() {
-        let s = viewer.render(cam)?;
+    for i in 0..orbit.frames() {
+        let s = viewer.render(&orbit.camera(i))?;
         triangles = triangles.max(s.triangles);
         viewer
             .read_image()?

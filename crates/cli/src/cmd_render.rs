@@ -7,6 +7,8 @@ use std::time::Instant;
 
 use anyhow::{bail, Context};
 use serde_json::json;
+use std::io::Write;
+
 use tessera_render::{FrameStats, Mode, Viewer, ViewerOptions};
 use tessera_select::CameraPath;
 
@@ -78,15 +80,17 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     let progressive = !(a.full_resolution || a.complete);
     let model = crate::open::open_model_paged(&a.model, progressive)
         .with_context(|| format!("cannot open {}", a.model.display()))?;
-    let path = match (&a.path, a.orbit) {
-        (Some(p), _) => CameraPath::from_file(p, a.width, a.height)?,
+    let shots = match (&a.path, a.orbit) {
+        (Some(p), _) => Shots::Path(CameraPath::from_file(p, a.width, a.height)?),
         (None, Some(n)) => {
             let scene = tessera_viewer::scene_points(model.as_ref(), 20_000);
             let up = a.up.unwrap_or_else(|| {
                 tessera_nav::guess_up(scene.min.to_array(), scene.max.to_array())
             });
-            tessera_viewer::orbit_path(&scene, up, n, a.width, a.height)
-                .context("cannot frame the model for an orbit")?
+            Shots::Orbit(
+                tessera_viewer::orbit_path(&scene, up, n, a.width, a.height)
+                    .context("cannot frame the model for an orbit")?,
+            )
         }
         (None, None) => bail!("give --path or --orbit"),
     };
@@ -116,48 +120,86 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     // What a remote model transferred to show the roots (its index top and root patches).
     let at_first_frame = model.transfer();
     let adapter = viewer.gpu().adapter_label.clone();
-    let cameras = path.cameras();
-    let mut frames: Vec<serde_json::Value> = Vec::with_capacity(cameras.len());
-    let mut all: Vec<FrameStats> = Vec::with_capacity(cameras.len());
-    for (i, cam) in cameras.iter().enumerate() {
-        let s = viewer.render(cam)?;
+    let n = shots.frames();
+    // Per-frame statistics go straight to the stats file (and aggregates are kept as
+    // sums and a histogram): a render of 10^9 frames holds no list of frames or cameras.
+    let mut stats_file = match &a.stats {
+        None => None,
+        Some(p) => {
+            let err =
+                |e: &dyn std::fmt::Display| anyhow::anyhow!("cannot write {}: {e}", p.display());
+            let mut f =
+                tessera_format::AtomicFile::create(p, 1 << 16).map_err(|e| err(&e.source))?;
+            let head = json!({
+                "model": a.model.display().to_string(),
+                "adapter": adapter,
+                "width": a.width,
+                "height": a.height,
+                "tolerance_px": a.tolerance,
+                "memory_budget_bytes": a.memory,
+            });
+            // The document is the head's fields, then "frames", then "summary".
+            let head = serde_json::to_string_pretty(&head)?;
+            let head = head.trim_end().trim_end_matches('}').trim_end();
+            write!(f, "{head},\n  \"frames\": [").map_err(|e| err(&e))?;
+            Some(f)
+        }
+    };
+    let bar = indicatif::ProgressBar::with_draw_target(
+        Some(u64::from(n)),
+        indicatif::ProgressDrawTarget::stderr(),
+    );
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("rendering {pos}/{len} frames [{elapsed}<{eta}]")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    if n < 50 {
+        bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
+    }
+    let mut agg = Aggregate::default();
+    let mut last = FrameStats::default();
+    crate::progress::install_interrupt_handler();
+    for i in 0..n {
+        if crate::progress::interrupted() {
+            bar.finish_and_clear();
+            bail!("interrupted after {i} of {n} frames (the stats file is not written)");
+        }
+        let cam = shots.camera(i);
+        let s = viewer.render(&cam)?;
         if let Some(dir) = &a.out {
             let img = viewer.read_image()?;
             img.save_png(&dir.join(format!("frame_{i:05}.png")))?;
         }
-        let rss = tessera_build::current_rss_bytes();
-        let mut v = serde_json::to_value(&s)?;
-        v["rss_bytes"] = json!(rss);
-        if let Some((bytes, requests)) = model.transfer() {
-            v["remote_bytes"] = json!(bytes);
-            v["remote_requests"] = json!(requests);
-            v["index_nodes"] = json!(viewer.scheduler().node_count());
+        if let Some(f) = stats_file.as_mut() {
+            let rss = tessera_build::current_rss_bytes();
+            let mut v = serde_json::to_value(&s)?;
+            v["rss_bytes"] = json!(rss);
+            if let Some((bytes, requests)) = model.transfer() {
+                v["remote_bytes"] = json!(bytes);
+                v["remote_requests"] = json!(requests);
+                v["index_nodes"] = json!(viewer.scheduler().node_count());
+            }
+            let sep = if i == 0 { "\n    " } else { ",\n    " };
+            write!(f, "{sep}{v}").map_err(|e| anyhow::anyhow!("cannot write the stats: {e}"))?;
         }
-        frames.push(v);
-        all.push(s);
+        agg.add(&s);
+        last = s;
+        bar.inc(1);
     }
+    bar.finish_and_clear();
     // The kernel's high-water mark also sees peaks inside a frame, which the per-frame
     // samples above miss.
     let peak_rss = tessera_build::peak_rss_bytes().unwrap_or_else(tessera_build::current_rss_bytes);
-    let n = all.len().max(1) as f64;
-    let mean = |f: &dyn Fn(&FrameStats) -> f64| all.iter().map(f).sum::<f64>() / n;
-    let mut sorted: Vec<f64> = all.iter().map(|s| s.frame_ms).collect();
-    sorted.sort_by(f64::total_cmp);
-    let median_ms = match sorted.len() {
-        0 => 0.0,
-        n if n % 2 == 1 => sorted[n / 2],
-        n => 0.5 * (sorted[n / 2 - 1] + sorted[n / 2]),
-    };
     let mut summary = json!({
-        "frames": all.len(),
+        "frames": agg.frames,
         "mode": mode,
-        "mean_frame_ms": mean(&|s| s.frame_ms),
-        "median_frame_ms": median_ms,
-        "max_frame_ms": sorted.last().copied().unwrap_or(0.0),
-        "mean_selection_ms": mean(&|s| s.selection_ms),
-        "mean_triangles": mean(&|s| s.triangles as f64),
-        "bytes_uploaded": all.iter().map(|s| s.bytes_uploaded).sum::<u64>(),
-        "failed_patches": all.last().map_or(0, |s| s.failed_patches),
+        "mean_frame_ms": agg.mean(agg.frame_ms),
+        "median_frame_ms": agg.median_ms(),
+        "max_frame_ms": agg.max_frame_ms,
+        "mean_selection_ms": agg.mean(agg.selection_ms),
+        "mean_triangles": agg.mean(agg.triangles),
+        "bytes_uploaded": agg.bytes_uploaded,
+        "failed_patches": last.failed_patches,
         "peak_rss_bytes": peak_rss,
         "setup_ms": setup_ms,
     });
@@ -170,26 +212,19 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
             "requests": r,
         });
     }
-    if let Some(p) = &a.stats {
-        let doc = json!({
-            "model": a.model.display().to_string(),
-            "adapter": adapter,
-            "width": a.width,
-            "height": a.height,
-            "tolerance_px": a.tolerance,
-            "memory_budget_bytes": a.memory,
-            "summary": summary,
-            "frames": frames,
-        });
-        write_atomic(p, serde_json::to_string_pretty(&doc)?.as_bytes())?;
+    if let (Some(mut f), Some(p)) = (stats_file, &a.stats) {
+        let err = |e: &dyn std::fmt::Display| anyhow::anyhow!("cannot write {}: {e}", p.display());
+        let summary_text = serde_json::to_string_pretty(&summary)?.replace('\n', "\n  ");
+        write!(f, "\n  ],\n  \"summary\": {summary_text}\n}}\n").map_err(|e| err(&e))?;
+        f.commit().map_err(|e| err(&e.source))?;
     }
     println!(
         "{} frames ({:?}) on {}: mean {:.1} ms/frame (median {:.1}), {:.0} triangles/frame, selection {:.3} ms, peak RSS {} MiB",
-        all.len(),
+        agg.frames,
         mode,
         adapter,
         summary["mean_frame_ms"].as_f64().unwrap_or(0.0),
-        median_ms,
+        agg.median_ms(),
         summary["mean_triangles"].as_f64().unwrap_or(0.0),
         summary["mean_selection_ms"].as_f64().unwrap_or(0.0),
         peak_rss >> 20,
@@ -199,17 +234,121 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
             "remote: {b0} bytes in {r0} requests before the first frame, {b} bytes in {r} requests in all"
         );
     }
-    let failed = all.last().map_or(0, |s| s.failed_patches);
-    if failed > 0 {
-        eprintln!("warning: {failed} corrupt patch(es) skipped; their parents were drawn");
-    }
+    report_skipped(&viewer, mode);
     Ok(ExitCode::SUCCESS)
 }
 
-fn write_atomic(path: &std::path::Path, bytes: &[u8]) -> anyhow::Result<()> {
-    use std::io::Write;
-    let err = |e: &dyn std::fmt::Display| anyhow::anyhow!("cannot write {}: {e}", path.display());
-    let mut file = tessera_format::AtomicFile::create(path, 1 << 16).map_err(|e| err(&e.source))?;
-    file.write_all(bytes).map_err(|e| err(&e))?;
-    file.commit().map_err(|e| err(&e.source))
+/// Says what became of patches that could not be read, truthfully for the mode: in a
+/// level-of-detail frame a failed node's parent is drawn instead (a failed root leaves
+/// its part of the model empty); at full resolution only leaves are drawn, so a failed
+/// leaf leaves a hole.
+fn report_skipped(viewer: &Viewer, mode: Mode) {
+    let failed = viewer.scheduler().failed();
+    if failed.is_empty() {
+        return;
+    }
+    let index = viewer.index();
+    let roots = failed
+        .iter()
+        .filter(|&&n| {
+            index
+                .nodes()
+                .get(n as usize)
+                .is_some_and(|r| r.parent == tessera_format::NO_NODE)
+        })
+        .count();
+    let n = failed.len();
+    if mode == Mode::FullResolution {
+        eprintln!(
+            "warning: {n} corrupt patch(es) skipped; full resolution draws leaves only, so \
+             their parts of the model are missing from the frames"
+        );
+    } else if roots == n {
+        eprintln!(
+            "warning: {n} corrupt root patch(es) skipped; their parts of the model are missing"
+        );
+    } else if roots > 0 {
+        eprintln!(
+            "warning: {n} corrupt patch(es) skipped: for {} their parents were drawn instead; \
+             {roots} were roots, whose parts of the model are missing",
+            n - roots
+        );
+    } else {
+        eprintln!("warning: {n} corrupt patch(es) skipped; their parents were drawn instead");
+    }
+}
+
+/// The cameras of a render: a path's frames or an orbit's, one at a time.
+enum Shots {
+    Path(CameraPath),
+    Orbit(tessera_viewer::OrbitCameras),
+}
+
+impl Shots {
+    fn frames(&self) -> u32 {
+        match self {
+            Shots::Path(p) => p.frames.max(1),
+            Shots::Orbit(o) => o.frames(),
+        }
+    }
+
+    fn camera(&self, i: u32) -> tessera_select::Camera {
+        match self {
+            Shots::Path(p) => p.camera(i),
+            Shots::Orbit(o) => o.camera(i),
+        }
+    }
+}
+
+/// Sums and a histogram of frame statistics (constant memory over any number of
+/// frames).
+#[derive(Default)]
+struct Aggregate {
+    frames: u64,
+    frame_ms: f64,
+    selection_ms: f64,
+    triangles: f64,
+    bytes_uploaded: u64,
+    max_frame_ms: f64,
+    /// Frame times in bins 0.1% wide on a log scale from 1 us (see `bin`).
+    bins: Vec<u32>,
+}
+
+impl Aggregate {
+    const BIN_STEP: f64 = 1.001;
+
+    fn bin(ms: f64) -> usize {
+        ((ms.max(1e-3) / 1e-3).ln() / Self::BIN_STEP.ln()) as usize
+    }
+
+    fn add(&mut self, s: &FrameStats) {
+        self.frames += 1;
+        self.frame_ms += s.frame_ms;
+        self.selection_ms += s.selection_ms;
+        self.triangles += s.triangles as f64;
+        self.bytes_uploaded += s.bytes_uploaded;
+        self.max_frame_ms = self.max_frame_ms.max(s.frame_ms);
+        let b = Self::bin(s.frame_ms).min(40_000);
+        if self.bins.len() <= b {
+            self.bins.resize(b + 1, 0);
+        }
+        self.bins[b] += 1;
+    }
+
+    fn mean(&self, sum: f64) -> f64 {
+        sum / self.frames.max(1) as f64
+    }
+
+    /// The median frame time, to 0.1% (the middle of its bin).
+    fn median_ms(&self) -> f64 {
+        let half = self.frames.div_ceil(2);
+        let mut seen = 0u64;
+        for (b, &c) in self.bins.iter().enumerate() {
+            seen += u64::from(c);
+            if seen >= half && c > 0 {
+                return 1e-3 * Self::BIN_STEP.powf(b as f64 + 0.5);
+            }
+        }
+        0.0
+    }
 }

@@ -27,6 +27,11 @@ pub fn install_interrupt_handler() {
     }
 }
 
+/// Whether a Ctrl-C (SIGINT/SIGTERM) arrived since [`install_interrupt_handler`].
+pub fn interrupted() -> bool {
+    INTERRUPTED.load(Ordering::SeqCst)
+}
+
 pub struct Bars {
     bar: Mutex<Option<ProgressBar>>,
     quiet: bool,

@@ -31,7 +31,8 @@ use tessera_stream::{ResidentStore, StoreError};
 pub struct GpuVertex {
     /// Local frame (model coordinates minus the cube origin).
     pub position: [f32; 3],
-    /// Unit normal as snorm16 xyz (w = 0).
+    /// Unit normal as snorm16 xyz; w: the node's [`vertex_tag`] (its level and a hash
+    /// of its id, for the colour-by-node and by-level modes).
     pub normal: [i16; 4],
     /// RGBA8, white when the model has no colours.
     pub color: [u8; 4],
@@ -42,9 +43,22 @@ pub const VERTEX_BYTES: u64 = std::mem::size_of::<GpuVertex>() as u64;
 /// Bytes per index (u32 indices: patches may exceed 65536 vertices on odd inputs).
 pub const INDEX_BYTES: u64 = 4;
 
+/// The tag every vertex of a node carries (`GpuVertex::normal[3]`): its level in the
+/// top 6 bits (levels above 63 share 63), a hash of (model, node) in the low 10.
+///
+/// Why in the vertex and not in the draw (a first-instance index): WebGL2 has no
+/// first-instance draws, and the normal's fourth component was free, so the tag costs
+/// no byte and no per-draw state on any backend.
+pub fn vertex_tag(model: u32, node: u32, level: u8) -> i16 {
+    let mut h = (node ^ model.wrapping_mul(0x9E37_79B9)).wrapping_mul(0x85EB_CA6B);
+    h ^= h >> 13;
+    let tag = (u16::from(level.min(63)) << 10) | (h & 0x3FF) as u16;
+    tag as i16
+}
+
 /// Converts a decoded patch to GPU vertices, positions in the local frame
-/// (`grid * quant_step`).
-pub fn gpu_vertices(p: &PatchData, quant_step: f64, out: &mut Vec<GpuVertex>) {
+/// (`grid * quant_step`), every vertex tagged with `tag` ([`vertex_tag`]).
+pub fn gpu_vertices(p: &PatchData, quant_step: f64, tag: i16, out: &mut Vec<GpuVertex>) {
     out.clear();
     out.reserve(p.positions.len());
     let snorm = |x: f32| (x.clamp(-1.0, 1.0) * 32767.0).round() as i16;
@@ -55,8 +69,8 @@ pub fn gpu_vertices(p: &PatchData, quant_step: f64, out: &mut Vec<GpuVertex>) {
             (q[2] as f64 * quant_step) as f32,
         ];
         let normal = match p.normals.get(i) {
-            Some(n) => [snorm(n[0]), snorm(n[1]), snorm(n[2]), 0],
-            None => [0; 4],
+            Some(n) => [snorm(n[0]), snorm(n[1]), snorm(n[2]), tag],
+            None => [0, 0, 0, tag],
         };
         let color = p.colors.get(i).copied().unwrap_or([255; 4]);
         out.push(GpuVertex {
@@ -103,6 +117,9 @@ pub struct GpuCache {
     stats: GpuCacheStats,
     /// Per model: resident bytes and patches, uploads, evictions.
     per_model: Vec<GpuCacheStats>,
+    /// Per model: the level of each node (for the vertex tags); see
+    /// [`GpuCache::set_levels`].
+    levels: Vec<Vec<u8>>,
     scratch: Vec<GpuVertex>,
 }
 
@@ -238,6 +255,7 @@ impl GpuCache {
             slots: FxHashMap::default(),
             stats: GpuCacheStats::default(),
             per_model: Vec::new(),
+            levels: Vec::new(),
             scratch: Vec::new(),
         }
     }
@@ -307,6 +325,16 @@ impl GpuCache {
             resident_patches: self.slots.len(),
             ..self.stats
         }
+    }
+
+    /// The level of every node of `model` (its index's nodes in order), for the tags
+    /// of the vertices uploaded from now on. Nodes without one are tagged level 0.
+    pub fn set_levels(&mut self, model: u32, levels: Vec<u8>) {
+        let m = model as usize;
+        if self.levels.len() <= m {
+            self.levels.resize_with(m + 1, Vec::new);
+        }
+        self.levels[m] = levels;
     }
 
     /// Counters of `model`'s patches.
@@ -412,7 +440,18 @@ impl GpuCache {
             }
         };
         let mut verts = std::mem::take(&mut self.scratch);
-        gpu_vertices(patch, quant_step, &mut verts);
+        let level = self
+            .levels
+            .get(model as usize)
+            .and_then(|l| l.get(node as usize))
+            .copied()
+            .unwrap_or(0);
+        gpu_vertices(
+            patch,
+            quant_step,
+            vertex_tag(model, node, level),
+            &mut verts,
+        );
         self.vertices
             .write(queue, vertices.start, bytemuck::cast_slice(&verts));
         self.scratch = verts;

@@ -248,7 +248,7 @@ impl Renderer {
             step_mode: wgpu::VertexStepMode::Vertex,
             attributes: &wgpu::vertex_attr_array![
                 0 => Float32x3,
-                1 => Snorm16x4,
+                1 => Sint16x4,
                 2 => Unorm8x4
             ],
         };
@@ -417,9 +417,11 @@ impl Renderer {
             depth,
             depth_view,
             readback,
+            // Depth can only be copied whole (WebGPU forbids partial copies of depth
+            // formats): one f32 per pixel, rows padded like the colour readback.
             depth_readback: device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("tessera depth readback"),
-                size: u64::from(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT),
+                size: u64::from(padded_row) * u64::from(height),
                 usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
                 mapped_at_creation: false,
             }),
@@ -479,37 +481,29 @@ impl Renderer {
     }
 
     /// Encodes one pass drawing `slots` from `cache` into `color`/`depth`; clears both
-    /// first when `clear`, else keeps them (a frame drawn in several passes). Each slot
-    /// comes with its node's [`instance_tag`] (the colour modes use it).
+    /// first when `clear`, else keeps them (a frame drawn in several passes).
     pub fn encode_pass<'a>(
         &self,
         encoder: &mut wgpu::CommandEncoder,
         color: &wgpu::TextureView,
         depth: &wgpu::TextureView,
         cache: &GpuCache,
-        slots: impl Iterator<Item = (u32, &'a Slot)> + Clone,
+        slots: impl Iterator<Item = &'a Slot> + Clone,
         clear: bool,
     ) {
-        self.encode_models_pass(
-            encoder,
-            color,
-            depth,
-            cache,
-            slots.map(|(tag, s)| (0, tag, s)),
-            clear,
-        );
+        self.encode_models_pass(encoder, color, depth, cache, slots.map(|s| (0, s)), clear);
     }
 
     /// [`Renderer::encode_pass`] for several models: each slot comes with its model's
-    /// uniform entry (written by [`Renderer::set_model_frame`]) and its tag; slots of
-    /// one model should come together (the entry is rebound when it changes).
+    /// uniform entry (written by [`Renderer::set_model_frame`]); slots of one model
+    /// should come together (the entry is rebound when it changes).
     pub fn encode_models_pass<'a>(
         &self,
         encoder: &mut wgpu::CommandEncoder,
         color: &wgpu::TextureView,
         depth: &wgpu::TextureView,
         cache: &GpuCache,
-        slots: impl Iterator<Item = (u32, u32, &'a Slot)> + Clone,
+        slots: impl Iterator<Item = (u32, &'a Slot)> + Clone,
         clear: bool,
     ) {
         let [r, g, b, a] = self.background;
@@ -549,7 +543,7 @@ impl Renderer {
         pass.set_index_buffer(cache.index_buffer().slice(..), wgpu::IndexFormat::Uint32);
         let draw = |pass: &mut wgpu::RenderPass<'_>| {
             let mut bound = None;
-            for (model, tag, s) in slots.clone() {
+            for (model, s) in slots.clone() {
                 if s.indices.is_empty() || model >= self.entries {
                     continue;
                 }
@@ -558,7 +552,7 @@ impl Renderer {
                     pass.set_bind_group(0, &self.bind_group, &[offset as u32]);
                     bound = Some(model);
                 }
-                pass.draw_indexed(s.indices.clone(), s.vertices.start as i32, tag..tag + 1);
+                pass.draw_indexed(s.indices.clone(), s.vertices.start as i32, 0..1);
             }
         };
         draw(&mut pass);
@@ -600,25 +594,28 @@ impl Renderer {
             wgpu::TexelCopyTextureInfo {
                 texture: &t.depth,
                 mip_level: 0,
-                origin: wgpu::Origin3d { x, y, z: 0 },
+                origin: wgpu::Origin3d::ZERO,
                 aspect: wgpu::TextureAspect::DepthOnly,
             },
             wgpu::TexelCopyBufferInfo {
                 buffer: &t.depth_readback,
                 layout: wgpu::TexelCopyBufferLayout {
                     offset: 0,
-                    bytes_per_row: Some(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT),
-                    rows_per_image: Some(1),
+                    bytes_per_row: Some(t.padded_row),
+                    rows_per_image: Some(t.height),
                 },
             },
             wgpu::Extent3d {
-                width: 1,
-                height: 1,
+                width: t.width,
+                height: t.height,
                 depth_or_array_layers: 1,
             },
         );
         queue.submit([enc.finish()]);
-        let slice = t.depth_readback.slice(0..4);
+        // Map only the 8 bytes (the mapping alignment) around the pixel.
+        let at = u64::from(y) * u64::from(t.padded_row) + u64::from(x) * 4;
+        let start = at & !7;
+        let slice = t.depth_readback.slice(start..start + 8);
         slice.map_async(wgpu::MapMode::Read, |_| {});
         device
             .poll(wgpu::PollType::wait_indefinitely())
@@ -627,7 +624,8 @@ impl Renderer {
             let data = slice
                 .get_mapped_range()
                 .map_err(|e| RenderError::Device(format!("{e:?}")))?;
-            f32::from_le_bytes([data[0], data[1], data[2], data[3]])
+            let o = (at - start) as usize;
+            f32::from_le_bytes([data[o], data[o + 1], data[o + 2], data[o + 3]])
         };
         t.depth_readback.unmap();
         Ok(Some(d))
@@ -686,12 +684,6 @@ impl Renderer {
             rgba,
         })
     }
-}
-
-/// The instance index a node is drawn with: its level in the top 8 bits, its id in
-/// the low 24 (the shader's colour modes hash it; only the look depends on it).
-pub fn instance_tag(node: u32, level: u8) -> u32 {
-    (u32::from(level) << 24) | (node & 0x00FF_FFFF)
 }
 
 /// A depth target for `width` x `height`.

@@ -29,7 +29,7 @@ pub use tessera_stream::{FrameStats, Mode};
 
 use crate::cache::{GpuCache, GpuStore};
 use crate::gpu::Gpu;
-use crate::renderer::{clip_planes_along, instance_tag, FrameParams, Renderer, Shading};
+use crate::renderer::{clip_planes_along, FrameParams, Renderer, Shading};
 use crate::RenderError;
 use tessera_image::Image;
 
@@ -210,6 +210,8 @@ impl Viewer {
         // Roots first, each model with the whole budget (they are pinned); then the
         // first split (no demand yet: an even share of what the roots leave).
         for i in 0..v.models.len() {
+            let levels = node_levels(v.models[i].index());
+            v.cache.set_levels(i as u32, levels);
             let (m, mut store) = v.parts(i);
             m.scheduler.load_roots(&mut m.pager, &mut store);
         }
@@ -346,6 +348,7 @@ impl Viewer {
             let (m, mut store) = self.parts(i);
             if let Some(ix) = m.model.latest_index() {
                 if ix.nodes().len() > m.scheduler.node_count() {
+                    store.cache.set_levels(i as u32, node_levels(&ix));
                     m.scheduler.set_index(&ix, &mut store);
                     m.grown = Some(ix);
                 }
@@ -664,10 +667,9 @@ fn fitted_planes<'a>(
     )
 }
 
-/// The instance tag of `node` of model `model` (models other than the first get their
-/// ids scrambled, so "colour by node" tells their patches apart).
-fn model_tag(model: u32, node: u32, level: u8) -> u32 {
-    instance_tag(node ^ model.wrapping_mul(0x9E_3779), level)
+/// The level of every node of `index`, in order (the GPU cache tags vertices with it).
+fn node_levels(index: &ModelIndex) -> Vec<u8> {
+    index.nodes().iter().map(|n| n.level).collect()
 }
 
 /// Encodes and submits one render pass drawing the resident nodes of each (model,
@@ -686,13 +688,10 @@ fn submit_pass(
         .create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("tessera frame encoder"),
         });
-    let slots = draws.iter().flat_map(|&(model, index, nodes)| {
-        nodes.iter().filter_map(move |&n| {
-            let level = index.nodes().get(n as usize).map_or(0, |r| r.level);
-            cache
-                .slot_of(model, n)
-                .map(|s| (model, model_tag(model, n, level), s))
-        })
+    let slots = draws.iter().flat_map(|&(model, _, nodes)| {
+        nodes
+            .iter()
+            .filter_map(move |&n| cache.slot_of(model, n).map(|s| (model, s)))
     });
     renderer.encode_models_pass(&mut enc, color, depth, cache, slots, clear);
     gpu.queue.submit([enc.finish()]);

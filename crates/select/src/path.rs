@@ -283,31 +283,32 @@ impl CameraPath {
     /// interpolated linearly, `up` linearly then renormalised, the field of view
     /// linearly. A path with as many frames as keyframes renders the keyframes as is.
     pub fn cameras(&self) -> Vec<Camera> {
+        (0..self.frames.max(1)).map(|i| self.camera(i)).collect()
+    }
+
+    /// The camera of frame `i` (`0..frames`), as [`Self::cameras`] would give it,
+    /// computed on its own: a path of 10^9 frames needs no list of them.
+    pub fn camera(&self, i: u32) -> Camera {
         let k = self.keyframes.len();
         let n = self.frames.max(1) as usize;
+        let i = (i as usize).min(n - 1);
         if k == 1 {
-            return vec![self.keyframes[0].clone(); n];
+            return self.keyframes[0].clone();
         }
         if n == k && !self.closed {
-            return self.keyframes.clone();
+            return self.keyframes[i].clone();
         }
         let segments = if self.closed { k } else { k - 1 };
-        (0..n)
-            .map(|i| {
-                let t = if self.closed {
-                    i as f64 / n as f64 * segments as f64
-                } else if n == 1 {
-                    0.0
-                } else {
-                    i as f64 / (n - 1) as f64 * segments as f64
-                };
-                let s = (t.floor() as usize).min(segments - 1);
-                let f = t - s as f64;
-                let a = &self.keyframes[s];
-                let b = &self.keyframes[(s + 1) % k];
-                lerp_camera(a, b, f)
-            })
-            .collect()
+        let t = if self.closed {
+            i as f64 / n as f64 * segments as f64
+        } else if n == 1 {
+            0.0
+        } else {
+            i as f64 / (n - 1) as f64 * segments as f64
+        };
+        let s = (t.floor() as usize).min(segments - 1);
+        let f = t - s as f64;
+        lerp_camera(&self.keyframes[s], &self.keyframes[(s + 1) % k], f)
     }
 }
 

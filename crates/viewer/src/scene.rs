@@ -50,58 +50,80 @@ pub fn scene_points(model: &dyn PatchReader, max_points: usize) -> ScenePoints {
 /// seen from each direction (`tessera_nav::frame` on the root vertices), 20 degrees
 /// above the horizon: one pivot (the mean of the per-direction targets) and one
 /// distance (the largest any direction needs), so the orbit turns without zooming.
+/// Cameras are computed one at a time ([`OrbitCameras::camera`]): an orbit of 10^9
+/// frames costs no memory.
+#[derive(Clone, Debug)]
+pub struct OrbitCameras {
+    pivot: DVec3,
+    distance: f64,
+    up: DVec3,
+    basis: (DVec3, DVec3),
+    frames: u32,
+    width: u32,
+    height: u32,
+}
+
+const ORBIT_FOV_DEG: f64 = 45.0;
+const ORBIT_ELEVATION_DEG: f64 = 20.0;
+
+impl OrbitCameras {
+    /// Frames of the orbit.
+    pub fn frames(&self) -> u32 {
+        self.frames
+    }
+
+    /// Unit direction from the eye toward the pivot at azimuth `az` (radians).
+    fn view_dir(up: DVec3, (a, b): (DVec3, DVec3), az: f64) -> DVec3 {
+        let el = ORBIT_ELEVATION_DEG.to_radians();
+        -((a * az.cos() + b * az.sin()) * el.cos() + up * el.sin())
+    }
+
+    /// The camera of frame `i` (`0..frames`; later frames wrap around).
+    pub fn camera(&self, i: u32) -> tessera_select::Camera {
+        let az = std::f64::consts::TAU * f64::from(i % self.frames) / f64::from(self.frames);
+        let d = Self::view_dir(self.up, self.basis, az);
+        tessera_select::Camera {
+            position: (self.pivot - d * self.distance).to_array(),
+            target: self.pivot.to_array(),
+            up: self.up.to_array(),
+            fov_y_deg: ORBIT_FOV_DEG,
+            width: self.width,
+            height: self.height,
+        }
+    }
+}
+
+/// The orbit of `frames` frames around `up` (see [`OrbitCameras`]).
 pub fn orbit_path(
     scene: &ScenePoints,
     up: tessera_nav::UpAxis,
     frames: u32,
     width: u32,
     height: u32,
-) -> Result<tessera_select::CameraPath, tessera_nav::FrameError> {
-    const FOV: f64 = 45.0;
-    let n = frames.max(1);
+) -> Result<OrbitCameras, tessera_nav::FrameError> {
     let u = up.vector();
-    let (a, b) = u.any_orthonormal_pair();
-    let elevation = 20f64.to_radians();
-    let dirs: Vec<DVec3> = (0..n)
-        .map(|i| {
-            let az = std::f64::consts::TAU * f64::from(i) / f64::from(n);
-            // From the eye toward the model: down by the elevation.
-            -((a * az.cos() + b * az.sin()) * elevation.cos() + u * elevation.sin())
-        })
-        .collect();
-    // Sample at least 16 directions for the pivot and the distance, whatever `frames`.
-    let probe: Vec<DVec3> = (0..16)
-        .map(|i| {
-            let az = std::f64::consts::TAU * f64::from(i) / 16.0;
-            -((a * az.cos() + b * az.sin()) * elevation.cos() + u * elevation.sin())
-        })
-        .chain(dirs.iter().copied())
-        .collect();
+    let basis = u.any_orthonormal_pair();
+    // 64 directions around the circle give the pivot and the distance, whatever
+    // `frames` is (between them the extent changes smoothly; the 8% margin covers it).
     let mut pivot = DVec3::ZERO;
-    let mut dist = 0.0f64;
-    for d in &probe {
-        let c = tessera_nav::frame(&scene.points, *d, u, FOV, width, height, 0.08)?;
+    let mut distance = 0.0f64;
+    const PROBES: u32 = 64;
+    for i in 0..PROBES {
+        let az = std::f64::consts::TAU * f64::from(i) / f64::from(PROBES);
+        let d = OrbitCameras::view_dir(u, basis, az);
+        let c = tessera_nav::frame(&scene.points, d, u, ORBIT_FOV_DEG, width, height, 0.08)?;
         let t = DVec3::from(c.target);
         pivot += t;
-        dist = dist.max((DVec3::from(c.position) - t).length());
+        distance = distance.max((DVec3::from(c.position) - t).length());
     }
-    pivot /= probe.len() as f64;
-    let keyframes = dirs
-        .iter()
-        .map(|d| tessera_select::Camera {
-            position: (pivot - *d * dist).to_array(),
-            target: pivot.to_array(),
-            up: u.to_array(),
-            fov_y_deg: FOV,
-            width,
-            height,
-        })
-        .collect();
-    Ok(tessera_select::CameraPath {
-        keyframes,
-        frames: n,
-        closed: false,
-        times: None,
-        duration_s: None,
+    pivot /= f64::from(PROBES);
+    Ok(OrbitCameras {
+        pivot,
+        distance,
+        up: u,
+        basis,
+        frames: frames.max(1),
+        width,
+        height,
     })
 }
