@@ -9,8 +9,10 @@ use tessera_viewer::{ViewArgs, ViewError};
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// The model: a .tsr file or an http:// URL of one.
-    model: PathBuf,
+    /// The models: .tsr files or http:// URLs of them, shown together in their own
+    /// model coordinates (scans of one site line up), sharing one memory budget.
+    #[arg(required = true)]
+    models: Vec<PathBuf>,
     /// Open at this camera (JSON, docs/camera.md; `C` in the viewer copies one).
     #[arg(long, value_name = "CAM.json")]
     camera: Option<PathBuf>,
@@ -64,15 +66,18 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         None => None,
         Some(p) => Some(CameraPath::from_file(p, a.width, a.height)?),
     };
-    let model = crate::open::open_model_paged(&a.model, true)
-        .with_context(|| format!("cannot open {}", a.model.display()))?;
-    let name = a.model.file_name().map_or_else(
-        || a.model.display().to_string(),
-        |n| n.to_string_lossy().into_owned(),
-    );
+    let mut models = Vec::with_capacity(a.models.len());
+    for path in &a.models {
+        let model = crate::open::open_model_paged(path, true)
+            .with_context(|| format!("cannot open {}", path.display()))?;
+        let name = path.file_name().map_or_else(
+            || path.display().to_string(),
+            |n| n.to_string_lossy().into_owned(),
+        );
+        models.push((model, name));
+    }
     let args = ViewArgs {
-        model,
-        name,
+        models,
         camera,
         up: a.up,
         tolerance_px: a.tolerance,

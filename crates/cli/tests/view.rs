@@ -19,7 +19,11 @@ fn nefertiti(dir: &Path) -> PathBuf {
     let obj = dir.join("nefertiti.obj");
     let out = Command::new("sh")
         .arg("-c")
-        .arg(format!("gunzip -c '{}' > '{}'", gz.display(), obj.display()))
+        .arg(format!(
+            "gunzip -c '{}' > '{}'",
+            gz.display(),
+            obj.display()
+        ))
         .status()
         .expect("gunzip");
     assert!(out.success(), "gunzip {}", gz.display());
@@ -66,8 +70,18 @@ fn scripted_view_shows_the_model_and_exits_0() {
     let log = dir.path().join("frames.jsonl");
     let out = xvfb_run()
         .arg(env!("CARGO_BIN_EXE_tessera"))
-        .args(["view".as_ref(), model.as_os_str(), "--script".as_ref(), script.as_os_str()])
-        .args(["--screenshot".as_ref(), shot.as_os_str(), "--frame-log".as_ref(), log.as_os_str()])
+        .args([
+            "view".as_ref(),
+            model.as_os_str(),
+            "--script".as_ref(),
+            script.as_os_str(),
+        ])
+        .args([
+            "--screenshot".as_ref(),
+            shot.as_os_str(),
+            "--frame-log".as_ref(),
+            log.as_os_str(),
+        ])
         .args(["--width", "640", "--height", "360"])
         .output()
         .expect("run the viewer");
@@ -85,27 +99,57 @@ fn scripted_view_shows_the_model_and_exits_0() {
         .collect();
     assert!(lines.len() >= 10, "{} frames logged", lines.len());
     for key in [
-        "frame", "t_s", "frame_ms", "triangles", "nodes", "pending_loads", "uploaded_bytes",
-        "gpu_bytes", "ram_bytes",
+        "frame",
+        "t_s",
+        "frame_ms",
+        "triangles",
+        "nodes",
+        "pending_loads",
+        "uploaded_bytes",
+        "gpu_bytes",
+        "ram_bytes",
     ] {
-        assert!(lines.iter().all(|l| l.get(key).is_some()), "field {key} missing");
+        assert!(
+            lines.iter().all(|l| l.get(key).is_some()),
+            "field {key} missing"
+        );
     }
     let t: Vec<f64> = lines.iter().map(|l| l["t_s"].as_f64().unwrap()).collect();
     assert!(t.windows(2).all(|w| w[1] >= w[0]), "times go back");
-    assert!(*t.last().unwrap() >= 3.0, "the script lasted {} s", t.last().unwrap());
+    assert!(
+        *t.last().unwrap() >= 3.0,
+        "the script lasted {} s",
+        t.last().unwrap()
+    );
     let last = lines.last().unwrap();
-    assert_eq!(last["pending_loads"], 0, "the view had not converged: {last}");
+    assert_eq!(
+        last["pending_loads"], 0,
+        "the view had not converged: {last}"
+    );
 
     // The same camera through `tessera render --complete`: the window's last frame is
     // the one the renderer draws (same pixels path: the offscreen target), up to what
     // progressive loading had not refined yet. Measured here: identical frames (PSNR
     // infinite) once converged; 35 dB leaves room for a patch or two still loading.
     let path = dir.path().join("last.json");
-    std::fs::write(&path, format!(r#"{{"frames": 1, "keyframes": [{CAMERA_B}}}]}}"#)).unwrap();
+    std::fs::write(
+        &path,
+        format!(r#"{{"frames": 1, "keyframes": [{CAMERA_B}}}]}}"#),
+    )
+    .unwrap();
     let frames = dir.path().join("render");
     let (code, _, stderr) = run_tessera(args![
-        "render", model, "--path", path, "--complete", "--out", frames, "--width", "640",
-        "--height", "360"
+        "render",
+        model,
+        "--path",
+        path,
+        "--complete",
+        "--out",
+        frames,
+        "--width",
+        "640",
+        "--height",
+        "360"
     ]);
     assert_eq!(code, 0, "{stderr}");
     let reference = Image::load_png(&frames.join("frame_00000.png")).unwrap();
@@ -114,8 +158,91 @@ fn scripted_view_shows_the_model_and_exits_0() {
     assert!(p > 35.0, "screenshot vs render: PSNR {p:.1} dB");
     // And it is not a blank frame: a quarter of the pixels or more show the bust.
     let bg = reference.pixel(0, 0);
-    let covered = img.rgba.chunks_exact(4).filter(|px| px[..3] != bg[..3]).count();
-    assert!(covered > img.rgba.len() / 4 / 4, "{covered} pixels cover the model");
+    let covered = img
+        .rgba
+        .chunks_exact(4)
+        .filter(|px| px[..3] != bg[..3])
+        .count();
+    assert!(
+        covered > img.rgba.len() / 4 / 4,
+        "{covered} pixels cover the model"
+    );
+}
+
+/// Two scans of one "site" (the bust and a copy 320 units along +x) in one window: both
+/// are drawn in their own model coordinates, side by side, where a camera looking at
+/// both expects them.
+#[test]
+fn two_models_are_shown_in_one_scene() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let a = nefertiti(dir.path());
+    let text = std::fs::read_to_string(dir.path().join("nefertiti.obj")).unwrap();
+    let shifted: String = text
+        .lines()
+        .map(|l| match l.strip_prefix("v ") {
+            Some(rest) => {
+                let v: Vec<f64> = rest
+                    .split_whitespace()
+                    .map(|x| x.parse().unwrap())
+                    .collect();
+                format!("v {} {} {}\n", v[0] + 320.0, v[1], v[2])
+            }
+            None => format!("{l}\n"),
+        })
+        .collect();
+    let obj_b = dir.path().join("copy.obj");
+    std::fs::write(&obj_b, shifted).unwrap();
+    let b = dir.path().join("copy.tsr");
+    let (code, _, stderr) = run_tessera(args!["build", obj_b, "-o", b, "--quiet"]);
+    assert_eq!(code, 0, "{stderr}");
+    // Looking at the pair from the front (-y), centred between them.
+    let cam =
+        r#"{"position": [160, -900, 40], "target": [160, 0, 40], "up": [0, 0, 1], "fov_y_deg": 45"#;
+    let script = dir.path().join("script.json");
+    std::fs::write(
+        &script,
+        format!(r#"{{"frames": 2, "keyframes": [{cam}, "time_s": 0}}, {cam}, "time_s": 2.0}}]}}"#),
+    )
+    .unwrap();
+    let shot = dir.path().join("shot.png");
+    let out = xvfb_run()
+        .arg(env!("CARGO_BIN_EXE_tessera"))
+        .args(["view".as_ref(), a.as_os_str(), b.as_os_str()])
+        .args([
+            "--script".as_ref(),
+            script.as_os_str(),
+            "--screenshot".as_ref(),
+            shot.as_os_str(),
+        ])
+        .args(["--width", "640", "--height", "360"])
+        .output()
+        .expect("run the viewer");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let img = Image::load_png(&shot).expect("screenshot");
+    let bg = img.pixel(0, 0);
+    // Model pixels in each half of the image, about as many: the bust on the left
+    // (x = 0), its copy on the right (x = 320).
+    let count = |x0: u32, x1: u32| {
+        (0..img.height)
+            .flat_map(|y| (x0..x1).map(move |x| (x, y)))
+            .filter(|&(x, y)| img.pixel(x, y)[..3] != bg[..3])
+            .count()
+    };
+    let (left, right) = (count(0, 320), count(320, 640));
+    let total = (img.width * img.height) as usize;
+    assert!(
+        left > total / 20 && right > total / 20,
+        "left {left}, right {right} px"
+    );
+    let ratio = left as f64 / right as f64;
+    assert!(
+        (0.7..1.4).contains(&ratio),
+        "the two copies differ: {left} vs {right} px"
+    );
 }
 
 #[test]
@@ -154,5 +281,8 @@ fn view_without_a_display_or_a_model_says_so() {
         .unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{stderr}");
-    assert!(stderr.contains("no display") && stderr.contains("tessera render"), "{stderr}");
+    assert!(
+        stderr.contains("no display") && stderr.contains("tessera render"),
+        "{stderr}"
+    );
 }

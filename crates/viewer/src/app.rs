@@ -23,7 +23,7 @@ use tessera_select::{Camera, CameraPath};
 use crate::blit::Blit;
 use crate::hud::{self, Action, Hud};
 use crate::pickers::{Picked, Picker, Purpose};
-use crate::scene::scene_points;
+use crate::scene::{scene_points, scene_points_of};
 use crate::{ViewArgs, ViewError};
 
 /// Two presses closer than this (and a few pixels) are a double-click.
@@ -79,7 +79,7 @@ struct Running {
     hud: Hud,
     picker: Picker,
     input: Input,
-    name: String,
+    names: Vec<String>,
     up: UpAxis,
     gpu_budget: u64,
     ram_budget: u64,
@@ -186,7 +186,14 @@ impl ApplicationHandler for App {
 impl Running {
     fn new(event_loop: &ActiveEventLoop, args: ViewArgs) -> Result<Running, ViewError> {
         let attrs = Window::default_attributes()
-            .with_title(format!("{} - Tessera", args.name))
+            .with_title(format!(
+                "{} - Tessera",
+                args.models
+                    .iter()
+                    .map(|(_, n)| n.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ))
             .with_inner_size(PhysicalSize::new(args.width.max(64), args.height.max(64)));
         let window = Arc::new(
             event_loop
@@ -246,14 +253,35 @@ impl Running {
 
         let gpu_budget = args.memory_bytes / 2;
         let ram_budget = args.memory_bytes / 4;
-        let model: Arc<dyn PatchReader> = args.model.clone();
-        let scene = scene_points(model.as_ref(), 20_000);
-        let up = args
-            .up
-            .unwrap_or_else(|| tessera_nav::guess_up(scene.min.to_array(), scene.max.to_array()));
-        let viewer = Viewer::with_gpu(
+        if args.models.is_empty() {
+            return Err(ViewError::Other("no model to show".into()));
+        }
+        let models: Vec<Arc<dyn PatchReader>> =
+            args.models.iter().map(|(m, _)| m.clone()).collect();
+        let names: Vec<String> = args.models.iter().map(|(_, n)| n.clone()).collect();
+        let refs: Vec<&dyn PatchReader> = models.iter().map(|m| m.as_ref()).collect();
+        let scene = scene_points_of(&refs, 20_000);
+        // The up axis most models guess from their own extent (ties: the first model's):
+        // models side by side make the union wide, not tall.
+        let up = args.up.unwrap_or_else(|| {
+            let guesses: Vec<UpAxis> = refs
+                .iter()
+                .map(|m| {
+                    let s = scene_points(*m, 1);
+                    tessera_nav::guess_up(s.min.to_array(), s.max.to_array())
+                })
+                .collect();
+            let count = |a: &UpAxis| guesses.iter().filter(|g| *g == a).count();
+            let best = guesses.iter().map(count).max().unwrap_or(0);
+            guesses
+                .iter()
+                .copied()
+                .find(|g| count(g) == best)
+                .unwrap_or(UpAxis::PosZ)
+        });
+        let viewer = Viewer::with_models(
             gpu,
-            model.clone(),
+            models.clone(),
             ViewerOptions {
                 tolerance_px: args.tolerance_px,
                 mode: Mode::Progressive,
@@ -271,7 +299,11 @@ impl Running {
             config.height,
         );
         nav.home_points(&scene.points);
-        nav.set_min_distance(model.index().grid().step() * 4.0);
+        let step = models
+            .iter()
+            .map(|m| m.index().grid().step())
+            .fold(f64::INFINITY, f64::min);
+        nav.set_min_distance(step * 4.0);
         if let Some(cam) = &args.camera {
             nav.set_camera(cam)
                 .map_err(|e| ViewError::Other(format!("--camera: {e}")))?;
@@ -295,9 +327,9 @@ impl Running {
             egui_renderer,
             nav,
             hud: Hud::new(args.tolerance_px, args.prefetch),
-            picker: Picker::new(model),
+            picker: Picker::new(models),
             input: Input::default(),
-            name: args.name,
+            names,
             up,
             gpu_budget,
             ram_budget,
@@ -327,7 +359,12 @@ impl Running {
             || self.nav.needs_update()
             || self.input.fly.any_motion()
             || self.stats.pending_loads > 0
+            || self.stats.cache_misses > 0
             || self.stats.index_wants > 0
+            || {
+                let p = self.viewer.pager_stats();
+                p.queued + p.in_flight > 0
+            }
             || self.picker.pending() > 0
             || self.message.is_some()
     }
@@ -479,8 +516,20 @@ impl Running {
         };
         let measure_screen = self.measure.iter().filter_map(to_screen).collect();
         let picked_screen = self.picked.as_ref().and_then(|(p, _, _)| to_screen(p));
+        let models_info: Vec<hud::ModelInfo> = (0..self.viewer.model_count())
+            .map(|i| {
+                let s = self.viewer.model_stats(i);
+                hud::ModelInfo {
+                    name: self.names[i].clone(),
+                    visible: self.viewer.is_visible(i),
+                    triangles: s.triangles,
+                    gpu_bytes: s.gpu_resident_bytes,
+                    gpu_budget: s.gpu_budget_bytes,
+                }
+            })
+            .collect();
         let info = hud::Info {
-            name: &self.name,
+            models: &models_info,
             adapter: &adapter,
             stats: &self.stats,
             gpu_budget: self.gpu_budget,
@@ -494,7 +543,9 @@ impl Running {
             measure: &self.measure,
             picks_pending: self.picker.pending(),
             message: message.as_deref(),
-            units_step: self.viewer.index().grid().step(),
+            units_step: (0..self.viewer.model_count())
+                .map(|i| self.viewer.index_of(i).grid().step())
+                .fold(f64::INFINITY, f64::min),
             measure_screen,
             picked_screen,
         };
@@ -657,6 +708,7 @@ impl Running {
                 self.nav.set_auto_rotate(next);
             }
             Action::ClearMeasure => self.measure.clear(),
+            Action::SetVisible(i, v) => self.viewer.set_visible(i, v),
             Action::Quit => self.script = None,
         }
         if a == Action::Quit {
@@ -788,12 +840,15 @@ impl Running {
         });
         self.input.last_press = if double { None } else { Some((now, at)) };
         let ray = self.ray_at(at);
+        let visible: Vec<bool> = (0..self.viewer.model_count())
+            .map(|i| self.viewer.is_visible(i))
+            .collect();
         if double {
-            self.picker.pick(Purpose::Recentre, ray);
+            self.picker.pick(Purpose::Recentre, ray, visible);
         } else if self.hud.measure_mode {
-            self.picker.pick(Purpose::Measure, ray);
+            self.picker.pick(Purpose::Measure, ray, visible);
         } else {
-            self.picker.pick(Purpose::Inspect, ray);
+            self.picker.pick(Purpose::Inspect, ray, visible);
         }
     }
 

@@ -78,12 +78,24 @@ pub enum Action {
     SetMode(NavMode),
     ToggleAutoRotate,
     ClearMeasure,
+    /// Show or hide model `i` of the scene.
+    SetVisible(usize, bool),
     Quit,
+}
+
+/// One model of the scene, for the HUD's list.
+pub struct ModelInfo {
+    pub name: String,
+    pub visible: bool,
+    pub triangles: u64,
+    pub gpu_bytes: u64,
+    /// Its share of the GPU budget this frame (0 when it is not split).
+    pub gpu_budget: u64,
 }
 
 /// Figures the HUD shows (read-only).
 pub struct Info<'a> {
-    pub name: &'a str,
+    pub models: &'a [ModelInfo],
     pub adapter: &'a str,
     pub stats: &'a FrameStats,
     pub gpu_budget: u64,
@@ -143,7 +155,31 @@ pub fn draw(ctx: &egui::Context, hud: &mut Hud, info: &Info) -> Vec<Action> {
         .resizable(false)
         .show(ctx, |ui| {
             let s = info.stats;
-            ui.label(egui::RichText::new(info.name).strong());
+            if let [m] = info.models {
+                ui.label(egui::RichText::new(&m.name).strong());
+            } else {
+                // Several models: one budget, split by what each view needs.
+                for (i, m) in info.models.iter().enumerate() {
+                    ui.horizontal(|ui| {
+                        let mut on = m.visible;
+                        if ui
+                            .checkbox(&mut on, egui::RichText::new(&m.name).strong())
+                            .changed()
+                        {
+                            actions.push(Action::SetVisible(i, on));
+                        }
+                        ui.label(
+                            egui::RichText::new(format!(
+                                "{} tris, {:.0}/{:.0} MiB",
+                                m.triangles,
+                                mib(m.gpu_bytes),
+                                mib(m.gpu_budget)
+                            ))
+                            .small(),
+                        );
+                    });
+                }
+            }
             ui.label(egui::RichText::new(info.adapter).small());
             let last = hud.frame_ms.back().copied().unwrap_or(0.0);
             let fps = if last > 0.0 { 1000.0 / last } else { 0.0 };

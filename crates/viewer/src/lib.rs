@@ -26,13 +26,13 @@ use tessera_format::PatchReader;
 use tessera_nav::UpAxis;
 use tessera_select::{Camera, CameraPath};
 
-pub use scene::{orbit_path, scene_points, OrbitCameras, ScenePoints};
+pub use scene::{orbit_path, scene_points, scene_points_of, OrbitCameras, ScenePoints};
 
 /// What `tessera view` was asked to show, and how.
 pub struct ViewArgs {
-    /// The model (a local file or a remote one) and its name for the HUD.
-    pub model: Arc<dyn PatchReader>,
-    pub name: String,
+    /// The models (local files or remote ones) and their names for the HUD: one scene,
+    /// each model in its own model coordinates, one GPU and one RAM budget shared.
+    pub models: Vec<(Arc<dyn PatchReader>, String)>,
     /// Open at this camera (else the home view framing the model).
     pub camera: Option<Camera>,
     /// Up axis (else guessed from the model's extent).

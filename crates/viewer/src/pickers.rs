@@ -33,24 +33,40 @@ pub struct Picked {
 
 /// The worker and its two channels.
 pub struct Picker {
-    tx: Sender<(Purpose, Ray)>,
+    tx: Sender<(Purpose, Ray, Vec<bool>)>,
     rx: Receiver<Picked>,
     pending: usize,
 }
 
 impl Picker {
-    pub fn new(model: Arc<dyn PatchReader>) -> Picker {
-        let (tx, jobs) = channel::<(Purpose, Ray)>();
+    /// A worker picking on `models` (the nearest hit over the visible ones).
+    pub fn new(models: Vec<Arc<dyn PatchReader>>) -> Picker {
+        let (tx, jobs) = channel::<(Purpose, Ray, Vec<bool>)>();
         let (done, rx) = channel();
         std::thread::Builder::new()
             .name("tessera-pick".into())
             .spawn(move || {
-                for (purpose, ray) in jobs {
+                for (purpose, ray, visible) in jobs {
                     let t0 = Instant::now();
-                    let (hit, error) = match tessera_pick::pick(model.as_ref(), &ray) {
-                        Ok((hit, _stats)) => (hit, None),
-                        Err(e) => (None, Some(e.to_string())),
-                    };
+                    let (mut hit, mut error): (Option<Hit>, Option<String>) = (None, None);
+                    for (i, model) in models.iter().enumerate() {
+                        if !visible.get(i).copied().unwrap_or(true) {
+                            continue;
+                        }
+                        match tessera_pick::pick(model.as_ref(), &ray) {
+                            Ok((Some(h), _)) => {
+                                if hit.as_ref().is_none_or(|b| h.distance < b.distance) {
+                                    hit = Some(h);
+                                }
+                            }
+                            Ok((None, _)) => {}
+                            Err(e) => error = Some(e.to_string()),
+                        }
+                    }
+                    // A model that could not be picked matters only if nothing was hit.
+                    if hit.is_some() {
+                        error = None;
+                    }
                     let ms = t0.elapsed().as_secs_f64() * 1e3;
                     if done
                         .send(Picked {
@@ -69,9 +85,9 @@ impl Picker {
         Picker { tx, rx, pending: 0 }
     }
 
-    /// Queues a pick along `ray`.
-    pub fn pick(&mut self, purpose: Purpose, ray: Ray) {
-        if self.tx.send((purpose, ray)).is_ok() {
+    /// Queues a pick along `ray` over the models marked `visible`.
+    pub fn pick(&mut self, purpose: Purpose, ray: Ray, visible: Vec<bool>) {
+        if self.tx.send((purpose, ray, visible)).is_ok() {
             self.pending += 1;
         }
     }
