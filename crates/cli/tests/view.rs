@@ -272,6 +272,19 @@ fn view_without_a_display_or_a_model_says_so() {
     assert!(stderr.contains("not a Tessera model"), "{stderr}");
 
     let model = nefertiti(dir.path());
+    // A display but no GPU driver (no Vulkan ICD found): what to install, no panic.
+    let out = xvfb_run()
+        .env("VK_ICD_FILENAMES", "/nonexistent/icd.json")
+        .env("WGPU_BACKEND", "vulkan")
+        .arg(env!("CARGO_BIN_EXE_tessera"))
+        .arg("view")
+        .arg(&model)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && !stderr.contains("panicked"), "{stderr}");
+    assert!(stderr.contains("mesa-vulkan-drivers") && stderr.contains("tessera render"), "{stderr}");
+
     let out = tessera()
         .env_remove("DISPLAY")
         .env_remove("WAYLAND_DISPLAY")

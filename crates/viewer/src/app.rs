@@ -204,9 +204,11 @@ impl Running {
             wgpu::Instance::new(wgpu::InstanceDescriptor::new_with_display_handle_from_env(
                 Box::new(event_loop.owned_display_handle()),
             ));
-        let surface = instance
-            .create_surface(window.clone())
-            .map_err(|e| ViewError::Window(format!("cannot make a drawing surface: {e}")))?;
+        // A surface needs a driver of some backend for this display: without one (no
+        // Vulkan ICD, no GL) the error is about the driver, not the display.
+        let surface = instance.create_surface(window.clone()).map_err(|e| {
+            ViewError::NoAdapter(format!("cannot draw into the window ({e})"))
+        })?;
         let gpu = Gpu::with_instance(instance, Some(&surface)).map_err(|e| match e {
             tessera_render::RenderError::NoAdapter(m) => ViewError::NoAdapter(m),
             other => ViewError::Render(other),
