@@ -206,9 +206,9 @@ impl Running {
             ));
         // A surface needs a driver of some backend for this display: without one (no
         // Vulkan ICD, no GL) the error is about the driver, not the display.
-        let surface = instance.create_surface(window.clone()).map_err(|e| {
-            ViewError::NoAdapter(format!("cannot draw into the window ({e})"))
-        })?;
+        let surface = instance
+            .create_surface(window.clone())
+            .map_err(|e| ViewError::NoAdapter(format!("cannot draw into the window ({e})")))?;
         let gpu = Gpu::with_instance(instance, Some(&surface)).map_err(|e| match e {
             tessera_render::RenderError::NoAdapter(m) => ViewError::NoAdapter(m),
             other => ViewError::Render(other),
@@ -907,10 +907,21 @@ impl Running {
                 };
             }
             KeyCode::Space => self.hud.freeze = !self.hud.freeze,
-            KeyCode::ArrowLeft => self.nav.key_orbit(-10.0, 0.0),
-            KeyCode::ArrowRight => self.nav.key_orbit(10.0, 0.0),
-            KeyCode::ArrowUp => self.nav.key_orbit(0.0, 10.0),
-            KeyCode::ArrowDown => self.nav.key_orbit(0.0, -10.0),
+            // Arrows orbit; with shift they pan (a twentieth of the window a press).
+            KeyCode::ArrowLeft | KeyCode::ArrowRight | KeyCode::ArrowUp | KeyCode::ArrowDown => {
+                let (dx, dy) = match code {
+                    KeyCode::ArrowLeft => (-1.0, 0.0),
+                    KeyCode::ArrowRight => (1.0, 0.0),
+                    KeyCode::ArrowUp => (0.0, 1.0),
+                    _ => (0.0, -1.0),
+                };
+                if self.input.shift {
+                    let step = f64::from(self.config.height) / 20.0;
+                    self.nav.key_pan(dx * step, -dy * step);
+                } else {
+                    self.nav.key_orbit(dx * 10.0, dy * 10.0);
+                }
+            }
             KeyCode::Equal | KeyCode::NumpadAdd | KeyCode::PageUp => self.nav.zoom(1.0, None),
             KeyCode::Minus | KeyCode::NumpadSubtract | KeyCode::PageDown => {
                 self.nav.zoom(-1.0, None)
