@@ -17,10 +17,13 @@ pub struct Args {
 enum What {
     /// A closed, watertight, noisy sphere (12 n^2 triangles, n = round(sqrt(N/12))).
     Sphere {
+        /// About how many triangles (e.g. 1M, 30M, 1e9).
         #[arg(long, value_parser = parse_count)]
         triangles: u64,
+        /// Output mesh (binary PLY), written atomically.
         #[arg(short, long)]
         output: PathBuf,
+        /// Seed of the noise: the same seed writes the same file, byte for byte.
         #[arg(long, default_value_t = 0)]
         seed: u64,
         /// Also write per-vertex colours.
@@ -29,29 +32,39 @@ enum What {
         /// Relative radial noise amplitude.
         #[arg(long, default_value_t = 0.05)]
         noise: f32,
+        /// No progress bar.
         #[arg(short, long)]
         quiet: bool,
     },
     /// A heightfield terrain (open mesh with a boundary).
     Terrain {
+        /// About how many triangles (e.g. 1M, 30M, 1e9).
         #[arg(long, value_parser = parse_count)]
         triangles: u64,
+        /// Output mesh (binary PLY), written atomically.
         #[arg(short, long)]
         output: PathBuf,
+        /// Seed of the relief: the same seed writes the same file, byte for byte.
         #[arg(long, default_value_t = 0)]
         seed: u64,
+        /// Also write per-vertex colours (by height).
         #[arg(long)]
         colors: bool,
+        /// No progress bar.
         #[arg(short, long)]
         quiet: bool,
     },
     /// K copies of a real scan laid out in a grid, as one mesh.
     Tile {
+        /// The scan to copy (PLY, OBJ or STL).
         input: PathBuf,
+        /// How many copies (laid out on a square grid, side by side).
         #[arg(long)]
         copies: u32,
+        /// Output mesh (binary PLY), written atomically.
         #[arg(short, long)]
         output: PathBuf,
+        /// No progress bar.
         #[arg(short, long)]
         quiet: bool,
     },

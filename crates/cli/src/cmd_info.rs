@@ -8,6 +8,7 @@ use tessera_format::{Grid, ModelIndex, ATTR_COLORS, ATTR_NORMALS, ATTR_UVS, NODE
 
 #[derive(clap::Args)]
 pub struct Args {
+    /// The model: a .tsr file or an http:// URL of one (e.g. from `tessera serve`).
     model: PathBuf,
     /// Print JSON on stdout.
     #[arg(long)]

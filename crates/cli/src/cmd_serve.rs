@@ -16,19 +16,28 @@ pub struct Args {
     /// Most connections served at once (more wait in the listen backlog).
     #[arg(long, default_value_t = 512)]
     max_connections: usize,
+    /// Serve the browser viewer from DIR at / (build it with `scripts/build-web`, which
+    /// writes web/dist): http://ADDR/ opens the first model, /?model=URL another.
+    #[arg(long, value_name = "DIR")]
+    web: Option<PathBuf>,
 }
 
 pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     let opts = tessera_serve::ServeOptions {
         addr: a.addr,
         max_connections: a.max_connections,
+        web_dir: a.web.clone(),
         ..Default::default()
     };
+    let web = a.web.is_some();
     tessera_serve::serve_blocking(&a.inputs, opts, |server| {
         let addr = server.local_addr();
         let names = server.model_names();
         let s = if names.len() == 1 { "" } else { "s" };
         println!("serving {} model{s} at http://{addr}/", names.len());
+        if web {
+            println!("viewer: http://{addr}/ (?model=/models/NAME.tsr picks a model)");
+        }
         for n in &names {
             println!("  http://{addr}/models/{n}");
         }

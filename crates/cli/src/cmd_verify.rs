@@ -8,6 +8,7 @@ use tessera_format::Model;
 
 #[derive(clap::Args)]
 pub struct Args {
+    /// The model file (.tsr) to check: every checksum, link, sphere and diamond rule.
     model: PathBuf,
 }
 
