@@ -30,6 +30,13 @@ pub const CAMERA_FIELDS: [&str; 6] = ["position", "target", "up", "fov_y_deg", "
 /// digits, and any sane camera is many orders of magnitude away from it.
 const PARALLEL_SIN_EPS: f64 = 1e-6;
 
+/// Largest coordinate of a camera's position or target (models lie within +-1e15).
+pub const MAX_COORDINATE: f64 = 1e15;
+
+/// Smallest distance between position and target, relative to their coordinates:
+/// 1e-9 keeps the view direction within ~1e-6 rad of what was meant.
+pub const MIN_RELATIVE_DISTANCE: f64 = 1e-9;
+
 /// A pinhole camera in model coordinates. Build it with [`Camera::from_json_str`],
 /// [`Camera::from_json_file`], [`Camera::new`] or [`Camera::orbit`], all of which
 /// validate; the fields are public for reading and for tools that tweak a valid camera
@@ -369,6 +376,15 @@ impl Camera {
                     format!("coordinates must be finite, got {v:?}"),
                 ));
             }
+            // Models lie within +-1e15 (the header's bound); beyond it differences of
+            // coordinates lose the precision a view direction needs (and squares
+            // overflow: 1e300 read as "target equals position").
+            if field != "up" && v.iter().any(|c| c.abs() > MAX_COORDINATE) {
+                return Err(CameraError::invalid(
+                    field,
+                    format!("coordinates must lie within +-1e15 (where models are), got {v:?}"),
+                ));
+            }
         }
         if !(self.fov_y_deg > 0.0 && self.fov_y_deg < 180.0) {
             return Err(CameraError::invalid(
@@ -392,10 +408,35 @@ impl Camera {
                 "equals position, so there is no view direction".into(),
             ));
         }
+        // The direction comes from a difference of coordinates: a target a few ulps from
+        // the position gives a direction off by degrees (a view of nothing).
+        let scale = dvec(self.position)
+            .abs()
+            .max(dvec(self.target).abs())
+            .max_element();
+        if dir_len < scale * MIN_RELATIVE_DISTANCE {
+            return Err(CameraError::invalid(
+                "target",
+                format!(
+                    "is only {dir_len:e} from position: at coordinates of {scale:e} the view \
+                     direction is not defined that finely (keep them at least {:e} apart)",
+                    scale * MIN_RELATIVE_DISTANCE
+                ),
+            ));
+        }
         let up = dvec(self.up);
         let up_len = up.length();
-        if !(up_len > 0.0 && up_len.is_finite()) {
+        if up_len == 0.0 {
             return Err(CameraError::invalid("up", "has zero length".into()));
+        }
+        if !up_len.is_finite() {
+            return Err(CameraError::invalid(
+                "up",
+                format!(
+                    "is too long to normalise, got {:?} (only its direction matters)",
+                    self.up
+                ),
+            ));
         }
         let sin = ((dir / dir_len).cross(up / up_len)).length();
         if sin.is_nan() || sin < PARALLEL_SIN_EPS {
@@ -745,5 +786,38 @@ mod tests {
     fn projection_scale_matches_definition() {
         let c = Camera::new([0.0; 3], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0], 90.0, 100, 1000).unwrap();
         assert!((c.projection_scale_px() - 500.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn extreme_coordinates_and_near_targets_are_refused_clearly() {
+        let cam = |p: [f64; 3], t: [f64; 3], up: [f64; 3]| Camera {
+            position: p,
+            target: t,
+            up,
+            fov_y_deg: 45.0,
+            width: 64,
+            height: 64,
+        };
+        let err = |c: Camera| c.validate().expect_err("refused").to_string();
+        let e = err(cam([1e300, 0.0, 0.0], [0.0; 3], [0.0, 0.0, 1.0]));
+        assert!(e.contains("position") && e.contains("1e15"), "{e}");
+        let e = err(cam([0.0; 3], [0.0, -2e15, 0.0], [0.0, 0.0, 1.0]));
+        assert!(e.contains("target") && e.contains("1e15"), "{e}");
+        // A few ulps apart at coordinates of 700: the direction would be degrees off.
+        let e = err(cam(
+            [0.0, -700.0, 100.0],
+            [1e-12, -700.0, 100.0],
+            [0.0, 0.0, 1.0],
+        ));
+        assert!(e.contains("target") && e.contains("only"), "{e}");
+        let e = err(cam([0.0, -5.0, 0.0], [0.0; 3], [0.0, 0.0, 1e300]));
+        assert!(e.contains("up") && e.contains("too long"), "{e}");
+        // Tiny but precise: a micro-scale model near the origin.
+        cam([0.0, -1e-12, 0.0], [0.0; 3], [0.0, 0.0, 1.0])
+            .validate()
+            .expect("a 1e-12 view at the origin is exact");
+        cam([0.0, -1e14, 0.0], [0.0, 1e14, 0.0], [0.0, 0.0, 1.0])
+            .validate()
+            .expect("georeferenced coordinates within the bound");
     }
 }

@@ -138,6 +138,22 @@ impl CameraPath {
         for (i, k) in list.iter().enumerate() {
             let mut k = k.clone();
             if let Some(o) = k.as_object_mut() {
+                // A keyframe's size must agree with the image's: the screen-space error
+                // is measured in these pixels, so a silent override would change the cut.
+                for (name, size, flag) in
+                    [("width", width, "--width"), ("height", height, "--height")]
+                {
+                    if let Some(v) = o.get(name) {
+                        if v.as_u64().is_some_and(|n| n != u64::from(size)) {
+                            return Err(field(
+                                &format!("keyframes[{i}].{name}"),
+                                format!(
+                                    "{v} differs from the image {name} {size} ({flag}): leave it out, or give {flag} {v}"
+                                ),
+                            ));
+                        }
+                    }
+                }
                 o.entry("width").or_insert(Value::from(width));
                 o.entry("height").or_insert(Value::from(height));
                 if let Some(t) = o.remove("time_s") {
@@ -417,6 +433,20 @@ mod tests {
         }
         let e = parse("{").unwrap_err().to_string();
         assert!(e.contains("not valid JSON"), "{e}");
+    }
+
+    #[test]
+    fn keyframe_sizes_must_agree_with_the_image() {
+        let with = KEY.replace("45}", "45,\"width\":640,\"height\":480}");
+        parse(&format!(r#"{{"frames": 1, "keyframes": [{with}]}}"#)).expect("same size");
+        let other = KEY.replace("45}", "45,\"width\":800}");
+        let e = parse(&format!(r#"{{"frames": 1, "keyframes": [{other}]}}"#))
+            .expect_err("800 != 640")
+            .to_string();
+        assert!(
+            e.contains("keyframes[0].width") && e.contains("--width"),
+            "{e}"
+        );
     }
 
     #[test]

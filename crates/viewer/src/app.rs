@@ -305,7 +305,10 @@ impl Running {
             .iter()
             .map(|m| m.index().grid().step())
             .fold(f64::INFINITY, f64::min);
-        nav.set_min_distance(step * 4.0);
+        // Closer than that, a copied camera would not validate (its target must lie at
+        // least 1e-9 x its coordinates from the eye: georeferenced scenes).
+        let far_coordinate = scene.min.abs().max(scene.max.abs()).max_element();
+        nav.set_min_distance((step * 4.0).max(far_coordinate * 4e-9));
         if let Some(cam) = &args.camera {
             nav.set_camera(cam)
                 .map_err(|e| ViewError::Other(format!("--camera: {e}")))?;
