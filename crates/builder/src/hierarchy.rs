@@ -23,7 +23,7 @@ use std::path::Path;
 use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 use std::sync::Mutex;
 use tessera_format::{
-    encode_patch, write_model, Header, NodeRecord, PatchData, PatchSpool, SpooledPatch,
+    encode_patch, write_model_until, Header, NodeRecord, PatchData, PatchSpool, SpooledPatch,
     ATTR_COLORS, ATTR_NORMALS, ATTR_UVS, NODE_FLAG_LEAF, NO_NODE,
 };
 use tessera_tetra::{DiamondKey, Locator, Tet};
@@ -636,7 +636,12 @@ fn finalize(
         page_nodes: opts.index_page_nodes,
         ..bytemuck::Zeroable::zeroed()
     };
-    write_model(output, &header, &records, &patches, &ctx.out)?;
+    match write_model_until(output, &header, &records, &patches, &ctx.out, &|| {
+        progress.cancelled()
+    }) {
+        Err(tessera_format::FormatError::Interrupted) => return Err(BuildError::Interrupted),
+        other => other?,
+    }
     progress.finish_stage();
     report.nodes = records.len() as u64;
     report.levels = levels;

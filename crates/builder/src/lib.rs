@@ -252,6 +252,57 @@ pub fn build(
     pool.install(|| build_in_pool(input, output, opts, progress))
 }
 
+/// Removes what builds killed before they could clean up (SIGKILL, a second Ctrl-C, a
+/// power cut) left in `dir`: `.tessera-build-PID-*` work directories (up to 3.4x the
+/// input) and the output's `.NAME.tmp-PID-N` file, when process PID is gone. Builds
+/// still running are left alone; each removal is logged as a warning. Linux only (the
+/// process test reads /proc); elsewhere nothing is removed.
+fn remove_leftovers(dir: &Path, output: &Path) {
+    if !Path::new("/proc/self").exists() {
+        return;
+    }
+    let out_name = output
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let tmp_prefix = format!(".{out_name}.tmp-");
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for e in entries.flatten() {
+        let name = e.file_name().to_string_lossy().into_owned();
+        let rest = if let Some(r) = name.strip_prefix(".tessera-build-") {
+            r
+        } else if let Some(r) = name.strip_prefix(&tmp_prefix) {
+            r
+        } else {
+            continue;
+        };
+        let Some(pid) = rest.split('-').next().and_then(|p| p.parse::<u32>().ok()) else {
+            continue;
+        };
+        if pid == std::process::id() || Path::new(&format!("/proc/{pid}")).exists() {
+            continue;
+        }
+        let path = e.path();
+        let removed = if path.is_dir() {
+            std::fs::remove_dir_all(&path)
+        } else {
+            std::fs::remove_file(&path)
+        };
+        match removed {
+            Ok(()) => tracing::warn!(
+                "removed {}, left by an earlier build (process {pid}) that did not finish",
+                path.display()
+            ),
+            Err(err) => tracing::warn!(
+                "{} was left by an earlier build (process {pid}) and cannot be removed: {err}",
+                path.display()
+            ),
+        }
+    }
+}
+
 fn build_in_pool(
     input: &Path,
     output: &Path,
@@ -267,8 +318,11 @@ fn build_in_pool(
             .unwrap_or(Path::new("."))
             .to_path_buf(),
     };
+    remove_leftovers(&tmp_parent, output);
+    // The PID in the name lets a later build tell a dead build's leftovers from a live
+    // one's (see `remove_leftovers`).
     let tmp = tempfile::Builder::new()
-        .prefix(".tessera-build-")
+        .prefix(&format!(".tessera-build-{}-", std::process::id()))
         .tempdir_in(&tmp_parent)
         .map_err(|e| BuildError::io(&tmp_parent, e))?;
     let mut report = BuildReport::default();

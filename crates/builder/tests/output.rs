@@ -52,3 +52,52 @@ fn output_that_is_the_input_or_a_directory_is_refused_before_building() {
     build(&input, &out, &BuildOptions::default(), &NoProgress).unwrap();
     assert!(out.is_file());
 }
+
+/// Issue 14, failure 10: a build killed by SIGKILL (or a second Ctrl-C) left its work
+/// directory (up to 3.4x the input) and a temporary model file. The next build in that
+/// directory removes the leftovers of processes that are gone, and leaves those of
+/// running processes alone.
+#[cfg(target_os = "linux")]
+#[test]
+fn leftovers_of_dead_builds_are_removed_by_the_next_build() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("in.obj");
+    std::fs::write(&input, OBJ).unwrap();
+    // PID 999999999 cannot exist (Linux's pid_max is at most 2^22); PID 1 always does.
+    let dead_dir = dir.path().join(".tessera-build-999999999-Ab12Cd");
+    std::fs::create_dir(&dead_dir).unwrap();
+    std::fs::write(dead_dir.join("vertices.bin"), vec![0u8; 4096]).unwrap();
+    let dead_tmp = dir.path().join(".out.tsr.tmp-999999999-0");
+    std::fs::write(&dead_tmp, b"").unwrap();
+    let live_dir = dir.path().join(".tessera-build-1-Ef34Gh");
+    std::fs::create_dir(&live_dir).unwrap();
+    let other = dir.path().join(".other.tsr.tmp-999999999-0");
+    std::fs::write(&other, b"").unwrap();
+    let out = dir.path().join("out.tsr");
+    build(&input, &out, &BuildOptions::default(), &NoProgress).expect("build");
+    assert!(out.exists());
+    assert!(
+        !dead_dir.exists(),
+        "the dead build's work directory is still there"
+    );
+    assert!(
+        !dead_tmp.exists(),
+        "the dead build's temporary model is still there"
+    );
+    assert!(
+        live_dir.exists(),
+        "a running process's directory was removed"
+    );
+    // Another output's temporary file is not this build's business.
+    assert!(other.exists());
+    let names: Vec<String> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(
+        !names
+            .iter()
+            .any(|n| n.starts_with(&format!(".tessera-build-{}-", std::process::id()))),
+        "this build left its own directory: {names:?}"
+    );
+}

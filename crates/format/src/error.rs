@@ -18,6 +18,9 @@ pub enum FormatError {
         #[source]
         source: std::io::Error,
     },
+    /// The write was stopped (Ctrl-C) before it finished; nothing was written.
+    #[error("interrupted before the model was written (nothing written)")]
+    Interrupted,
     /// The file does not start with [`crate::MAGIC`]: not a Tessera model.
     #[error("not a Tessera model file (bad magic bytes)")]
     BadMagic,

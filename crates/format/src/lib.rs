@@ -51,4 +51,6 @@ pub use records::{
 #[cfg(feature = "mmap")]
 pub use verify::{verify_structure, VerifyReport, MAX_PROBLEM_MESSAGES};
 #[cfg(feature = "write")]
-pub use writer::{encode_index, replace_index, write_model, PatchSpool, SpooledPatch};
+pub use writer::{
+    encode_index, replace_index, write_model, write_model_until, PatchSpool, SpooledPatch,
+};

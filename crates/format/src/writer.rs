@@ -274,6 +274,20 @@ pub fn write_model(
     patches: &[SpooledPatch],
     spool: &PatchSpool,
 ) -> Result<(), FormatError> {
+    write_model_until(path, header, nodes, patches, spool, &|| false)
+}
+
+/// [`write_model`] that gives up with [`FormatError::Interrupted`] (nothing at `path`,
+/// the temporary file removed) when `cancelled` says so: it is asked every 256 patches
+/// and once more just before the rename, so a Ctrl-C during the write is never ignored.
+pub fn write_model_until(
+    path: &Path,
+    header: &Header,
+    nodes: &[NodeRecord],
+    patches: &[SpooledPatch],
+    spool: &PatchSpool,
+    cancelled: &dyn Fn() -> bool,
+) -> Result<(), FormatError> {
     if nodes.len() != patches.len() {
         return Err(FormatError::InvalidInput {
             detail: format!("{} nodes but {} patches", nodes.len(), patches.len()),
@@ -293,12 +307,19 @@ pub fn write_model(
     out.write_all(&index).map_err(io)?;
     let mut buf = Vec::new();
     for (i, patch) in patches.iter().enumerate() {
+        if i % 256 == 0 && cancelled() {
+            return Err(FormatError::Interrupted);
+        }
         buf.resize(patch.bytes as usize, 0);
         spool.read_into(patch, &mut buf)?;
         if crc32fast::hash(&buf) != patch.crc32 {
             return Err(FormatError::PatchChecksum { node: i as u32 });
         }
         out.write_all(&buf).map_err(io)?;
+    }
+    if cancelled() {
+        // Dropping `out` removes the temporary file.
+        return Err(FormatError::Interrupted);
     }
     out.commit()?;
     tracing::info!(

@@ -135,6 +135,33 @@ fn failed_write_leaves_nothing_and_keeps_old_file() {
     assert!(!fresh.exists());
 }
 
+/// Issue 14, failure 10: a Ctrl-C that arrived once the write had begun was ignored (the
+/// model was completed, exit 0). A cancelled write stops, leaving nothing behind, and
+/// an old file in place.
+#[test]
+fn cancelled_write_leaves_nothing_and_keeps_old_file() {
+    let f = Fixture::new();
+    let before = f.bytes();
+    let files_before = f.files_in_dir();
+    let err = write_model_until(&f.path, &f.header, &f.nodes, &f.spooled, &f.spool, &|| true)
+        .unwrap_err();
+    assert!(matches!(err, FormatError::Interrupted), "{err}");
+    assert_eq!(f.bytes(), before);
+    assert_eq!(f.files_in_dir(), files_before);
+    // Cancelled only at the end (after every patch was copied): still nothing written.
+    let calls = std::cell::Cell::new(0usize);
+    let fresh = f.dir.path().join("fresh.tsr");
+    let late = || {
+        calls.set(calls.get() + 1);
+        calls.get() > f.spooled.len().div_ceil(256)
+    };
+    let err =
+        write_model_until(&fresh, &f.header, &f.nodes, &f.spooled, &f.spool, &late).unwrap_err();
+    assert!(matches!(err, FormatError::Interrupted), "{err}");
+    assert!(!fresh.exists());
+    assert_eq!(f.files_in_dir(), files_before);
+}
+
 fn flip(bytes: &[u8], at: usize) -> Vec<u8> {
     let mut b = bytes.to_vec();
     b[at] ^= 0x10;
