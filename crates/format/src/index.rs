@@ -502,7 +502,7 @@ impl ModelIndex {
                 next.stats.first_frame_bytes += e.bytes as u64;
             }
             next.patch_end = end;
-            check_nodes(&h, &records, next.nodes.len())?;
+            check_nodes(&h, &records, next.nodes.len(), next.nodes.last())?;
             next.nodes.extend(records);
         }
         if target == layout.page_count {
@@ -701,14 +701,32 @@ fn check_header(h: &Header) -> Result<(), FormatError> {
     Ok(())
 }
 
-/// Every patch inside the patch data, every link a valid index other than the node's own.
-/// `nodes` are the records of nodes `first..`.
-fn check_nodes(h: &Header, nodes: &[NodeRecord], first: usize) -> Result<(), FormatError> {
+/// Every patch inside the patch data, every link a valid index other than the node's own,
+/// levels in table order (a paged reader shows the complete levels of what it read, so
+/// a level out of order would hide nodes it showed). `nodes` are the records of nodes
+/// `first..`; `before` is node `first - 1`'s.
+fn check_nodes(
+    h: &Header,
+    nodes: &[NodeRecord],
+    first: usize,
+    before: Option<&NodeRecord>,
+) -> Result<(), FormatError> {
     let count = h.node_count;
     let patch_start = h.patch_data_offset;
     let patch_end = h.patch_data_offset + h.patch_data_bytes;
+    let mut level = before.map_or(0, |n| n.level);
     for (i, n) in nodes.iter().enumerate() {
         let node = (first + i) as u32;
+        if n.level < level {
+            return Err(FormatError::InvalidNode {
+                node,
+                detail: format!(
+                    "level {} after a node of level {level}: the table is not sorted by level",
+                    n.level
+                ),
+            });
+        }
+        level = n.level;
         let end = n.patch_offset.checked_add(n.patch_bytes as u64);
         if n.patch_offset < patch_start || end.is_none_or(|e| e > patch_end) {
             return Err(FormatError::PatchOutOfRange { node });

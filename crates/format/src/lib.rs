@@ -6,7 +6,8 @@
 //! nothing of GPUs or thread policies, and its reader does no I/O of its own: a
 //! [`ModelIndex`] is parsed from bytes and patches are decoded from bytes, which come
 //! from a [`ByteSource`]. Features: `mmap` (default) adds the memory-mapped local
-//! [`Model`] and `verify_structure`; `write` (default) the atomic writer. Without them
+//! [`Model`] and `verify_structure` over it (`verify_index` checks a model in any
+//! [`ByteSource`]); `write` (default) the atomic writer. Without them
 //! the crate builds for `wasm32-unknown-unknown`.
 //!
 //! Layout: [`Header`] (256 bytes) | paged index (a block table, a directory of pages, and
@@ -18,13 +19,14 @@
 mod atomic;
 mod codec;
 mod error;
+#[doc(hidden)]
+pub mod fuzzing;
 mod grid;
 mod index;
 mod pages;
 #[cfg(feature = "mmap")]
 mod reader;
 mod records;
-#[cfg(feature = "mmap")]
 mod verify;
 #[cfg(feature = "write")]
 mod writer;
@@ -49,7 +51,8 @@ pub use records::{
     NODE_FLAG_LEAF, NO_NODE,
 };
 #[cfg(feature = "mmap")]
-pub use verify::{verify_structure, VerifyReport, MAX_PROBLEM_MESSAGES};
+pub use verify::verify_structure;
+pub use verify::{verify_index, VerifyReport, MAX_PROBLEM_MESSAGES};
 #[cfg(feature = "write")]
 pub use writer::{
     encode_index, replace_index, write_model, write_model_until, PatchSpool, SpooledPatch,

@@ -5,6 +5,8 @@
 
 use crate::codec::PatchData;
 use crate::grid::Grid;
+use crate::index::{ByteSource, ModelIndex};
+#[cfg(feature = "mmap")]
 use crate::reader::Model;
 use crate::records::{NodeRecord, NODE_FLAG_LEAF, NO_NODE};
 
@@ -52,10 +54,17 @@ fn sphere_inside(inner: &[f32; 4], outer: &[f32; 4], eps: f64) -> bool {
 
 /// Checks every node and patch of `model`; see the module docs. Never panics on a
 /// corrupt model: every problem becomes a message.
+#[cfg(feature = "mmap")]
 pub fn verify_structure(model: &Model) -> VerifyReport {
+    verify_index(model.index(), model.bytes())
+}
+
+/// [`verify_structure`] of a model held by any [`ByteSource`] (`source`, whose index is
+/// `index`): a byte slice, a remote model. Never panics on a corrupt model.
+pub fn verify_index<S: ByteSource + ?Sized>(index: &ModelIndex, source: &S) -> VerifyReport {
     let mut r = VerifyReport::default();
-    let h = model.header();
-    let nodes = model.nodes();
+    let h = index.header();
+    let nodes = index.nodes();
     let step = Grid::of_header(h).step();
     let eps = h.cube_size * 1e-5;
     let grid_max = 1u64 << h.quant_bits.min(32);
@@ -150,7 +159,7 @@ pub fn verify_structure(model: &Model) -> VerifyReport {
         }
 
         // The patch itself.
-        match model.decode_patch(i) {
+        match index.read_patch(source, i) {
             Ok(patch) => check_patch(&mut r, i, n, &patch, step, eps, grid_max),
             Err(e) => r.problem(format!("node {i}: {e}")),
         }

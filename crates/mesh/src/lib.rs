@@ -8,6 +8,8 @@
 
 mod common;
 mod error;
+#[doc(hidden)]
+pub mod fuzzing;
 mod obj;
 mod ply_read;
 mod ply_write;

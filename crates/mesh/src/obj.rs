@@ -36,7 +36,17 @@ pub(crate) fn read_obj(
     path: &Path,
     visitor: &mut dyn MeshVisitor,
 ) -> Result<ImportReport, MeshError> {
-    let scan = prescan(path, open(path)?)?;
+    read_obj_from(path, || open(path), visitor)
+}
+
+/// Read OBJ data from the streams `open` returns (called twice: the first pass, then
+/// the second); `path` is only used in messages.
+pub(crate) fn read_obj_from<R: Read>(
+    path: &Path,
+    mut open: impl FnMut() -> Result<R, MeshError>,
+    visitor: &mut dyn MeshVisitor,
+) -> Result<ImportReport, MeshError> {
+    let scan = prescan(path, open()?)?;
     let attributes = Attributes {
         normals: scan.uses_vn,
         colors: scan.colors,
@@ -48,7 +58,7 @@ pub(crate) fn read_obj(
         face_count: None,
     })?;
     let mut reader = ObjReader::new(path, attributes, scan.uses_vt || scan.uses_vn);
-    let mut src = Source::new(open(path)?);
+    let mut src = Source::new(open()?);
     let mut line = Vec::new();
     while reader.next_line(&mut src, &mut line)? {
         reader.statement(&line, visitor)?;

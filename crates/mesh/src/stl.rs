@@ -25,10 +25,24 @@ pub(crate) fn read_stl(
     path: &Path,
     visitor: &mut dyn MeshVisitor,
 ) -> Result<ImportReport, MeshError> {
-    let mut file = File::open(path).map_err(|e| MeshError::io(path, e))?;
+    let open = || File::open(path).map_err(|e| MeshError::io(path, e));
+    let file = open()?;
     let size = file.metadata().map_err(|e| MeshError::io(path, e))?.len();
+    read_stl_from(path, size, file, open, visitor)
+}
+
+/// Read STL data of `size` bytes: the first 512 bytes of `first` decide ascii or binary,
+/// then the stream `open_again` returns is read from the start; `path` is only used in
+/// messages.
+pub(crate) fn read_stl_from<R: Read>(
+    path: &Path,
+    size: u64,
+    first: R,
+    open_again: impl FnOnce() -> Result<R, MeshError>,
+    visitor: &mut dyn MeshVisitor,
+) -> Result<ImportReport, MeshError> {
     let mut head = Vec::with_capacity(512);
-    (&mut file)
+    first
         .take(512)
         .read_to_end(&mut head)
         .map_err(|e| MeshError::io(path, e))?;
@@ -36,7 +50,7 @@ pub(crate) fn read_stl(
         .get(80..84)
         .map(|b| u64::from(u32::from_le_bytes([b[0], b[1], b[2], b[3]])));
     let is_binary_size = declared.is_some_and(|n| size == BINARY_HEADER + FACET_BYTES * n);
-    let mut src = Source::new(File::open(path).map_err(|e| MeshError::io(path, e))?);
+    let mut src = Source::new(open_again()?);
     let mut welder = Welder::new(path);
     if !is_binary_size && looks_like_ascii(&head) {
         visitor.header(&MeshHeader::default())?;

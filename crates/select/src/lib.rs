@@ -23,6 +23,8 @@ pub mod camera;
 pub mod edges;
 #[cfg(feature = "extract")]
 pub mod extract;
+#[doc(hidden)]
+pub mod fuzzing;
 pub mod merge;
 pub mod path;
 pub mod residency;

@@ -1,0 +1,179 @@
+//! Replays the fuzz corpora of the mesh importers (`fuzz/corpus/{ply,obj,stl}/`, the
+//! committed seeds) and every crash the fuzzers found (`fuzz/regressions/<target>/`,
+//! minimised) through the fuzz targets' own bodies (`tessera_mesh::fuzzing`), on stable:
+//! no panic, errors as clear one-line messages, and for each regression the error its
+//! fix gives. Then an adversarial corpus: every seed truncated at many offsets and
+//! mutated byte by byte (deterministically), again without a panic.
+
+use std::path::{Path, PathBuf};
+
+use tessera_mesh::fuzzing::{fuzz_obj, fuzz_ply, fuzz_stl, FUZZ_PATH};
+use tessera_mesh::{ImportReport, MeshError};
+
+type Target = fn(&[u8]) -> Result<ImportReport, MeshError>;
+
+const TARGETS: [(&str, Target); 3] = [("ply", fuzz_ply), ("obj", fuzz_obj), ("stl", fuzz_stl)];
+
+/// Each regression file and a piece of the error its fix gives.
+const REGRESSIONS: &[(&str, &str, &str)] = &[];
+
+fn fuzz_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz")
+}
+
+/// The files of `fuzz/<kind>/<target>/`, sorted (none when the folder is absent).
+fn files(kind: &str, target: &str) -> Vec<PathBuf> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir(fuzz_dir().join(kind).join(target))
+        .map(|d| d.filter_map(|e| e.ok().map(|e| e.path())).collect())
+        .unwrap_or_default();
+    v.retain(|p| p.is_file());
+    v.sort();
+    v
+}
+
+fn read(p: &Path) -> Vec<u8> {
+    std::fs::read(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+}
+
+fn assert_clear(e: &MeshError) {
+    let m = e.to_string();
+    assert!(
+        m.starts_with(FUZZ_PATH),
+        "message does not name the input: {m}"
+    );
+    assert!(m.len() > FUZZ_PATH.len() + 5, "message says nothing: {m}");
+}
+
+#[test]
+fn corpora_replay_without_panics() {
+    for (target, run) in TARGETS {
+        let seeds = files("corpus", target);
+        assert!(
+            seeds.len() >= 5,
+            "fuzz/corpus/{target} has {} seeds",
+            seeds.len()
+        );
+        let mut ok = 0;
+        for f in seeds.iter().chain(&files("regressions", target)) {
+            match run(&read(f)) {
+                Ok(_) => ok += 1,
+                Err(e) => assert_clear(&e),
+            }
+        }
+        // The seeds are mostly valid meshes: a reader that refuses them all is broken.
+        assert!(ok * 2 > seeds.len(), "{target}: only {ok} seeds read");
+    }
+}
+
+#[test]
+fn regressions_give_their_errors() {
+    for (target, run) in TARGETS {
+        for f in files("regressions", target) {
+            let name = f.file_name().unwrap().to_string_lossy().into_owned();
+            let Some(&(_, _, want)) = REGRESSIONS
+                .iter()
+                .find(|(t, n, _)| *t == target && *n == name)
+            else {
+                panic!("fuzz/regressions/{target}/{name} has no expected error in REGRESSIONS");
+            };
+            match run(&read(&f)) {
+                Ok(r) => panic!("{target}/{name} reads as {r:?}, expected an error with {want:?}"),
+                Err(e) => {
+                    assert_clear(&e);
+                    assert!(e.to_string().contains(want), "{target}/{name}: {e}");
+                }
+            }
+        }
+    }
+}
+
+/// xorshift64*: deterministic mutations.
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
+    }
+    fn below(&mut self, n: usize) -> usize {
+        (self.next() % n.max(1) as u64) as usize
+    }
+}
+
+/// Bytes an adversary likes: digits, signs, separators, huge and negative counts.
+const INTERESTING: &[&[u8]] = &[
+    b"-1",
+    b"4294967295",
+    b"1e39",
+    b"nan",
+    b"inf",
+    b"0",
+    b"/",
+    b"//",
+    b"\\\n",
+    b" ",
+    b"\n",
+    b"\r\n",
+    b"\xef\xbb\xbf",
+    b"\0",
+    b"\xff\xff\xff\xff",
+    b"3.5",
+    b"-0",
+    b"#",
+];
+
+/// Truncations at many offsets and random edits of `seed`.
+fn malformed(seed: &[u8], rng: &mut Rng, count: usize) -> Vec<Vec<u8>> {
+    let mut out = Vec::new();
+    for k in 0..count / 2 {
+        out.push(seed[..seed.len() * k / (count / 2)].to_vec());
+    }
+    while out.len() < count {
+        let mut b = seed.to_vec();
+        for _ in 0..1 + rng.below(4) {
+            let at = rng.below(b.len());
+            match rng.below(4) {
+                0 => b[at] = rng.next() as u8,
+                1 => b[at] ^= 1 << rng.below(8),
+                2 => {
+                    let s = INTERESTING[rng.below(INTERESTING.len())];
+                    b.splice(at..at, s.iter().copied());
+                }
+                _ => {
+                    let end = (at + 1 + rng.below(16)).min(b.len());
+                    b.drain(at..end);
+                }
+            }
+            if b.is_empty() {
+                break;
+            }
+        }
+        out.push(b);
+    }
+    out
+}
+
+#[test]
+fn adversarial_meshes_give_errors_not_panics() {
+    let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+    let mut total = 0;
+    let mut errors = 0;
+    for (target, run) in TARGETS {
+        for f in files("corpus", target) {
+            let seed = read(&f);
+            for bad in malformed(&seed, &mut rng, 40) {
+                total += 1;
+                if let Err(e) = run(&bad) {
+                    assert_clear(&e);
+                    errors += 1;
+                }
+            }
+        }
+    }
+    eprintln!("{total} malformed meshes: {errors} errors, the rest read");
+    assert!(
+        total >= 100 && errors >= 100,
+        "{total} meshes, {errors} errors"
+    );
+}
