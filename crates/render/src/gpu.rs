@@ -16,6 +16,7 @@ impl Gpu {
     /// A device without a window. The backend comes from `WGPU_BACKEND` when set (e.g.
     /// `gl` for llvmpipe), else wgpu's default order, which on a machine without a GPU
     /// finds lavapipe (Mesa's CPU Vulkan). `WGPU_ADAPTER_NAME` picks an adapter by name.
+    #[cfg(feature = "native")]
     pub fn headless() -> Result<Gpu, RenderError> {
         // Without WGPU_BACKEND, try the primary backends first and GL only if they find
         // nothing: probing EGL on a machine without it logs a scary (harmless) error.
@@ -37,33 +38,55 @@ impl Gpu {
         }
     }
 
-    /// A device for `instance`, compatible with `surface` when given.
+    /// A device for `instance`, compatible with `surface` when given (blocking).
+    #[cfg(feature = "native")]
     pub fn with_instance(
         instance: wgpu::Instance,
         surface: Option<&wgpu::Surface<'_>>,
     ) -> Result<Gpu, RenderError> {
-        let adapter = pollster::block_on(wgpu::util::initialize_adapter_from_env_or_default(
-            &instance, surface,
-        ))
-        .map_err(|e| RenderError::NoAdapter(e.to_string()))?;
+        pollster::block_on(Self::with_instance_async(instance, surface))
+    }
+
+    /// [`Gpu::with_instance`] without blocking: what a browser runs (its adapter and
+    /// device arrive through promises). Limits: wgpu's downlevel defaults, or WebGL2's
+    /// where the adapter has no compute shaders (WebGL2: no storage buffers either; the
+    /// renderer needs neither), with the adapter's buffer size and texture resolution.
+    pub async fn with_instance_async(
+        instance: wgpu::Instance,
+        surface: Option<&wgpu::Surface<'_>>,
+    ) -> Result<Gpu, RenderError> {
+        let adapter = wgpu::util::initialize_adapter_from_env_or_default(&instance, surface)
+            .await
+            .map_err(|e| RenderError::NoAdapter(e.to_string()))?;
         let info = adapter.get_info();
         let adapter_label = format!("{} ({:?}, {:?})", info.name, info.backend, info.device_type);
         // Ask for the adapter's buffer size limits: the GPU cache wants two big buffers.
         let alimits = adapter.limits();
+        let compute = adapter
+            .get_downlevel_capabilities()
+            .flags
+            .contains(wgpu::DownlevelFlags::COMPUTE_SHADERS);
+        let base = if compute {
+            wgpu::Limits::downlevel_defaults()
+        } else {
+            wgpu::Limits::downlevel_webgl2_defaults()
+        };
         let limits = wgpu::Limits {
             max_buffer_size: alimits.max_buffer_size,
-            ..wgpu::Limits::downlevel_defaults()
+            ..base
         }
         .using_resolution(alimits.clone());
         // Lines for the wireframe overlay, where the adapter has them.
         let features = adapter.features() & wgpu::Features::POLYGON_MODE_LINE;
-        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
-            label: Some("tessera device"),
-            required_features: features,
-            required_limits: limits,
-            ..Default::default()
-        }))
-        .map_err(|e| RenderError::Device(e.to_string()))?;
+        let (device, queue) = adapter
+            .request_device(&wgpu::DeviceDescriptor {
+                label: Some("tessera device"),
+                required_features: features,
+                required_limits: limits,
+                ..Default::default()
+            })
+            .await
+            .map_err(|e| RenderError::Device(e.to_string()))?;
         tracing::info!(adapter = %adapter_label, "gpu ready");
         Ok(Gpu {
             instance,
@@ -74,7 +97,17 @@ impl Gpu {
         })
     }
 
+    /// Whether draws may start at a vertex offset (WebGL2 cannot): pass it to
+    /// [`crate::Renderer::set_base_vertex`].
+    pub fn base_vertex(&self) -> bool {
+        self.adapter
+            .get_downlevel_capabilities()
+            .flags
+            .contains(wgpu::DownlevelFlags::BASE_VERTEX)
+    }
+
     /// Blocks until the GPU has finished all submitted work.
+    #[cfg(feature = "native")]
     pub fn wait_idle(&self) -> Result<(), RenderError> {
         self.device
             .poll(wgpu::PollType::wait_indefinitely())

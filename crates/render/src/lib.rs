@@ -10,19 +10,28 @@
 //! model over one shared cache, one GPU budget and one RAM budget, split every frame
 //! by each view's demand (`tessera_stream::BudgetSplit`), and draws every model in its
 //! own local frame into one pass and one depth buffer.
+//!
+//! Feature `native` (default): the [`Viewer`] (over `tessera-page`'s loader threads)
+//! and the blocking device setup. Without it the crate builds for wasm32: the
+//! browser client (`tessera-web`) draws with the same [`Renderer`], shader and
+//! [`GpuCache`] / [`GpuStore`], on a device from [`Gpu::with_instance_async`].
 
 mod cache;
 mod gpu;
 mod renderer;
+#[cfg(feature = "native")]
 mod viewer;
 
 pub use cache::{GpuCache, GpuCacheStats, GpuStore, GpuVertex, Slot};
 pub use gpu::Gpu;
 pub use renderer::{
-    clip_planes, clip_planes_along, ColorMode, FrameParams, Light, Renderer, Shading, PATCH_SHADER,
+    clip_planes, clip_planes_along, ColorMode, FrameParams, Light, Renderer, Shading, DEPTH_FORMAT,
+    PATCH_SHADER,
 };
 pub use tessera_image::{diff_stats, enclosed_background_pixels, psnr, Image, ImageError};
-pub use viewer::{FrameStats, Mode, Viewer, ViewerOptions};
+pub use tessera_stream::{FrameStats, Mode};
+#[cfg(feature = "native")]
+pub use viewer::{Viewer, ViewerOptions};
 
 /// Errors of the renderer.
 #[derive(Debug, thiserror::Error)]

@@ -12,7 +12,7 @@
 use glam::{DVec3, Mat4};
 use tessera_select::Camera;
 
-use crate::cache::{GpuCache, GpuVertex, Slot};
+use crate::cache::{GpuCache, GpuVertex, Slot, VERTEX_BYTES};
 use crate::RenderError;
 use tessera_image::Image;
 
@@ -202,6 +202,8 @@ pub struct Renderer {
     pub background: [f64; 4],
     /// Whether vertex colours are used (else a clay colour).
     pub has_colors: bool,
+    /// Whether draws may start at a vertex offset (see [`Renderer::set_base_vertex`]).
+    base_vertex: bool,
 }
 
 struct Targets {
@@ -326,7 +328,16 @@ impl Renderer {
             targets: None,
             background: [0.06, 0.07, 0.09, 1.0],
             has_colors: false,
+            base_vertex: true,
         }
+    }
+
+    /// Whether the device draws from a vertex offset (`base_vertex`; wgpu's
+    /// `DownlevelFlags::BASE_VERTEX`, see [`crate::Gpu::base_vertex`]). Without it (WebGL2,
+    /// GL ES 3.0) each patch's draw binds the vertex buffer at the patch's first vertex
+    /// instead: the same pixels, one vertex-buffer binding per draw. Default: true.
+    pub fn set_base_vertex(&mut self, supported: bool) {
+        self.base_vertex = supported;
     }
 
     fn make_uniforms(
@@ -552,7 +563,14 @@ impl Renderer {
                     pass.set_bind_group(0, &self.bind_group, &[offset as u32]);
                     bound = Some(model);
                 }
-                pass.draw_indexed(s.indices.clone(), s.vertices.start as i32, 0..1);
+                if self.base_vertex {
+                    pass.draw_indexed(s.indices.clone(), s.vertices.start as i32, 0..1);
+                } else {
+                    let bytes = u64::from(s.vertices.start) * VERTEX_BYTES
+                        ..u64::from(s.vertices.end) * VERTEX_BYTES;
+                    pass.set_vertex_buffer(0, cache.vertex_buffer().slice(bytes));
+                    pass.draw_indexed(s.indices.clone(), 0, 0..1);
+                }
             }
         };
         draw(&mut pass);

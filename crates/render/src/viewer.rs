@@ -157,6 +157,7 @@ impl Viewer {
         }
         let mut renderer = Renderer::new(&gpu.device, wgpu::TextureFormat::Rgba8Unorm);
         renderer.background = opts.background;
+        renderer.set_base_vertex(gpu.base_vertex());
         renderer.has_colors = models[0].index().header().attributes & ATTR_COLORS != 0;
         renderer.ensure_models(&gpu.device, models.len() as u32);
         let cache = GpuCache::new(&gpu.device, opts.gpu_budget_bytes);

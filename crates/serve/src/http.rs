@@ -20,6 +20,8 @@ use crate::range::{self, Ranges};
 pub struct Shared {
     pub models: Models,
     pub request_timeout: Duration,
+    /// Static files served at `/` (canonical path), if any.
+    pub web_dir: Option<std::path::PathBuf>,
 }
 
 type St = Arc<Shared>;
@@ -84,6 +86,8 @@ async fn dispatch(AxState(st): AxState<St>, req: Request) -> Response<Body> {
         Route::Model(rest.to_string())
     } else if path == "/" {
         Route::Root
+    } else if st.web_dir.is_some() {
+        Route::Static(path.clone())
     } else {
         return text(StatusCode::NOT_FOUND, "not found\n");
     };
@@ -110,10 +114,12 @@ async fn dispatch(AxState(st): AxState<St>, req: Request) -> Response<Body> {
     let head = method == Method::HEAD;
     let work = async {
         match route {
+            Route::Root if st.web_dir.is_some() => static_file(&st, "/index.html").await,
             Route::Root => text(
                 StatusCode::OK,
                 "tessera serve: the model catalogue is at /api/models\n",
             ),
+            Route::Static(p) => static_file(&st, &p).await,
             Route::Catalogue => catalogue(&st).await,
             Route::Model(raw) => model(&st, &parts.headers, &raw, head).await,
         }
@@ -133,6 +139,67 @@ enum Route {
     Root,
     Catalogue,
     Model(String),
+    Static(String),
+}
+
+/// The content type of a static file of the web directory, by extension.
+fn content_type(name: &str) -> &'static str {
+    match name
+        .rsplit_once('.')
+        .map(|(_, e)| e.to_ascii_lowercase())
+        .as_deref()
+    {
+        Some("html") | Some("htm") => "text/html; charset=utf-8",
+        Some("js") | Some("mjs") => "text/javascript; charset=utf-8",
+        Some("wasm") => "application/wasm",
+        Some("json") => "application/json",
+        Some("css") => "text/css; charset=utf-8",
+        Some("png") => "image/png",
+        Some("svg") => "image/svg+xml",
+        Some("txt") | Some("md") => "text/plain; charset=utf-8",
+        _ => "application/octet-stream",
+    }
+}
+
+/// A file of the web directory: every segment of `path` percent-decoded and checked
+/// like a model name (no separators, control characters or leading dots), the result
+/// resolved inside the directory (symbolic links out of it are not followed), read
+/// whole (the viewer's files are small).
+async fn static_file(st: &St, path: &str) -> Response<Body> {
+    let Some(root) = st.web_dir.clone() else {
+        return text(StatusCode::NOT_FOUND, "not found\n");
+    };
+    let mut rel = std::path::PathBuf::new();
+    for seg in path.trim_start_matches('/').split('/') {
+        match decode_name(seg) {
+            Some(s) => rel.push(s),
+            None => return text(StatusCode::NOT_FOUND, "not found\n"),
+        }
+    }
+    let name = rel.to_string_lossy().into_owned();
+    let read = tokio::task::spawn_blocking(move || {
+        let p = std::fs::canonicalize(root.join(&rel)).ok()?;
+        if !p.starts_with(&root) || !p.is_file() {
+            return None;
+        }
+        std::fs::read(p).ok()
+    })
+    .await
+    .ok()
+    .flatten();
+    let Some(body) = read else {
+        return text(StatusCode::NOT_FOUND, "not found\n");
+    };
+    let n = body.len();
+    let mut r = Response::new(Body::from(body));
+    let h = r.headers_mut();
+    h.insert(
+        header::CONTENT_TYPE,
+        HeaderValue::from_static(content_type(&name)),
+    );
+    h.insert(header::CONTENT_LENGTH, HeaderValue::from(n));
+    h.insert(header::CACHE_CONTROL, HeaderValue::from_static("no-cache"));
+    r
 }
 
 fn text(status: StatusCode, msg: &'static str) -> Response<Body> {

@@ -30,6 +30,12 @@
 //!   header. Served directories are rescanned for each catalogue request and every
 //!   [`ServeOptions::rescan_interval`]. A file that is not a valid model is skipped with
 //!   a warning (and not served).
+//! - With [`ServeOptions::web_dir`] (`tessera serve --web DIR`): the browser viewer's
+//!   static files, `GET /` its `index.html`, `GET /NAME` (also in subdirectories) the
+//!   file of that name under the directory, each path segment percent-decoded and
+//!   checked like a model name, resolved inside the directory only (`404` otherwise),
+//!   with its content type (`application/wasm` for `.wasm`) and `Cache-Control:
+//!   no-cache`. Without it `/` answers one line of text.
 //! - CORS for embedding: `Access-Control-Allow-Origin: *`, methods `GET, HEAD, OPTIONS`,
 //!   the `Range`, `If-Range` and other conditional request headers allowed,
 //!   `Content-Range`, `Content-Length`, `ETag`, `Accept-Ranges`, `Last-Modified` exposed.
@@ -64,7 +70,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Duration;
 
-/// Settings of a server; `Default` is what `tessera serve` uses.
+/// Settings of a server; `Default` is what `tessera serve` uses (without `--web`).
 #[derive(Clone, Debug)]
 pub struct ServeOptions {
     /// Address to listen on (`127.0.0.1:8080`); port 0 picks a free port.
@@ -84,6 +90,10 @@ pub struct ServeOptions {
     pub rescan_interval: Duration,
     /// How long shutdown waits for in-flight responses (10 s).
     pub shutdown_grace: Duration,
+    /// A directory of static files (the browser viewer built by `scripts/build-web`,
+    /// `web/dist`) served at `/`: `GET /` is its `index.html`, `GET /NAME` its file
+    /// `NAME` (None: `/` answers a line of text).
+    pub web_dir: Option<PathBuf>,
 }
 
 impl Default for ServeOptions {
@@ -97,6 +107,7 @@ impl Default for ServeOptions {
             max_header_bytes: 16 << 10,
             rescan_interval: Duration::from_secs(2),
             shutdown_grace: Duration::from_secs(10),
+            web_dir: None,
         }
     }
 }
@@ -169,11 +180,30 @@ impl Server {
                 })
             }
         };
+        let web_dir = match &opts.web_dir {
+            None => None,
+            Some(d) => {
+                let canon = std::fs::canonicalize(d).map_err(|source| ServeError::Input {
+                    path: d.clone(),
+                    source,
+                })?;
+                if !canon.join("index.html").is_file() {
+                    return Err(ServeError::Input {
+                        path: d.clone(),
+                        source: std::io::Error::other(
+                            "no index.html in the --web directory (build it with scripts/build-web)",
+                        ),
+                    });
+                }
+                Some(canon)
+            }
+        };
         Ok(Server {
             listener,
             shared: Arc::new(http::Shared {
                 models,
                 request_timeout: opts.request_timeout,
+                web_dir,
             }),
             opts,
         })

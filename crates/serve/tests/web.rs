@@ -1,0 +1,152 @@
+//! `ServeOptions::web_dir` (`tessera serve --web DIR`): the browser viewer's static files
+//! at `/`, with their content types, nothing outside the directory, the models and the
+//! catalogue unchanged; a directory without `index.html` is refused at start.
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use tessera_serve::{ServeError, ServeOptions, Server};
+
+fn model() -> Vec<u8> {
+    let dir = tempfile::tempdir().unwrap();
+    let ply = dir.path().join("s.ply");
+    let tsr = dir.path().join("s.tsr");
+    tessera_gen::write_sphere(
+        &ply,
+        &tessera_gen::SphereOptions {
+            triangles: 4_000,
+            ..Default::default()
+        },
+        &tessera_gen::NoProgress,
+    )
+    .unwrap();
+    tessera_build::build(
+        &ply,
+        &tsr,
+        &tessera_build::BuildOptions {
+            leaf_triangles: 400,
+            node_triangles: 200,
+            threads: Some(2),
+            ..Default::default()
+        },
+        &tessera_build::NoProgress,
+    )
+    .unwrap();
+    std::fs::read(&tsr).unwrap()
+}
+
+/// Serves `inputs` with `web` on a free loopback port until the returned sender drops.
+fn start(
+    inputs: Vec<PathBuf>,
+    web: PathBuf,
+) -> Result<(String, tokio::sync::oneshot::Sender<()>), ServeError> {
+    let (tx, rx) = tokio::sync::oneshot::channel::<()>();
+    let (ready_tx, ready_rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let rt = tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(1)
+            .enable_all()
+            .build()
+            .unwrap();
+        rt.block_on(async move {
+            let opts = ServeOptions {
+                addr: "127.0.0.1:0".parse().unwrap(),
+                web_dir: Some(web),
+                ..ServeOptions::default()
+            };
+            match Server::bind(&inputs, opts).await {
+                Ok(s) => {
+                    let _ = ready_tx.send(Ok(s.local_addr()));
+                    let _ = s
+                        .run(async {
+                            let _ = rx.await;
+                        })
+                        .await;
+                }
+                Err(e) => {
+                    let _ = ready_tx.send(Err(e));
+                }
+            }
+        });
+    });
+    let addr = ready_rx.recv().unwrap()?;
+    Ok((format!("http://{addr}"), tx))
+}
+
+fn get(url: &str) -> (u16, Option<String>, Vec<u8>) {
+    let agent = ureq::Agent::new_with_config(
+        ureq::Agent::config_builder()
+            .http_status_as_error(false)
+            .timeout_global(Some(Duration::from_secs(20)))
+            .build(),
+    );
+    let mut r = agent.get(url).call().unwrap();
+    let ct = r
+        .headers()
+        .get("content-type")
+        .and_then(|v| v.to_str().ok())
+        .map(str::to_string);
+    let body = r.body_mut().read_to_vec().unwrap();
+    (r.status().as_u16(), ct, body)
+}
+
+#[test]
+fn the_web_directory_is_served_at_the_root() {
+    let tmp = tempfile::tempdir().unwrap();
+    let models = tmp.path().join("models");
+    let web = tmp.path().join("web");
+    std::fs::create_dir_all(web.join("sub")).unwrap();
+    std::fs::create_dir(&models).unwrap();
+    std::fs::write(models.join("m.tsr"), model()).unwrap();
+    std::fs::write(web.join("index.html"), "<!doctype html><title>t</title>").unwrap();
+    std::fs::write(web.join("app_bg.wasm"), b"\0asm\x01\0\0\0").unwrap();
+    std::fs::write(web.join("app.js"), "export {}").unwrap();
+    std::fs::write(web.join("sub").join("x.json"), "{}").unwrap();
+    std::fs::write(web.join(".secret"), "no").unwrap();
+    std::fs::write(tmp.path().join("outside.txt"), "no").unwrap();
+    #[cfg(unix)]
+    std::os::unix::fs::symlink(tmp.path().join("outside.txt"), web.join("link.txt")).unwrap();
+
+    let (base, _stop) = start(vec![models.clone()], web.clone()).expect("server");
+    let (s, ct, body) = get(&format!("{base}/"));
+    assert_eq!(s, 200);
+    assert_eq!(ct.as_deref(), Some("text/html; charset=utf-8"));
+    assert!(body.starts_with(b"<!doctype html>"));
+    let (s, ct, body) = get(&format!("{base}/app_bg.wasm"));
+    assert_eq!((s, ct.as_deref()), (200, Some("application/wasm")));
+    assert_eq!(body, b"\0asm\x01\0\0\0");
+    let (s, ct, _) = get(&format!("{base}/app.js"));
+    assert_eq!(
+        (s, ct.as_deref()),
+        (200, Some("text/javascript; charset=utf-8"))
+    );
+    assert_eq!(get(&format!("{base}/sub/x.json")).0, 200);
+    for bad in [
+        "/missing.js",
+        "/.secret",
+        "/%2e%2e/outside.txt",
+        "/sub/%2e%2e/%2e%2e/outside.txt",
+        "/sub%2f..%2f..%2foutside.txt",
+        "/link.txt",
+        "/sub",
+    ] {
+        assert_eq!(get(&format!("{base}{bad}")).0, 404, "{bad}");
+    }
+    // The models and the catalogue are as without --web.
+    let (s, _, cat) = get(&format!("{base}/api/models"));
+    assert_eq!(s, 200);
+    assert!(String::from_utf8_lossy(&cat).contains("/models/m.tsr"));
+    let (s, _, m) = get(&format!("{base}/models/m.tsr"));
+    assert_eq!(s, 200);
+    assert_eq!(m, std::fs::read(models.join("m.tsr")).unwrap());
+
+    // A directory that is not a built viewer is refused at start.
+    let empty = tmp.path().join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    match start(vec![models], empty) {
+        Err(ServeError::Input { source, .. }) => {
+            assert!(source.to_string().contains("index.html"), "{source}")
+        }
+        other => panic!("expected a refusal, got {:?}", other.map(|s| s.0)),
+    }
+}

@@ -1,0 +1,37 @@
+//! Tessera in the browser: the viewer that `web/tessera.js` drives, built for
+//! `wasm32-unknown-unknown` by `scripts/build-web` (wasm-bindgen). It runs the same
+//! Rust code as the desktop: the format reader and patch decoder (`tessera-format`
+//! without its file features), the streaming core's `Scheduler`, the `Navigator` and
+//! the wgpu `Renderer` / `GpuCache` of `tessera-render` (without its native feature)
+//! with the native WGSL shader, on WebGL2.
+//!
+//! - [`plan`]: what to fetch (the index through a sparse byte source, patches in
+//!   coalesced range requests, at most 3 in flight) and the decoding of fetched
+//!   patches within a time budget per frame. Plain Rust, tested natively.
+//! - `http` (wasm32): range requests with `fetch`, the ETag pinned with `If-Range`,
+//!   errors worded for the page (404, no range support, CORS, model changed).
+//! - `viewer` (wasm32): `Viewer`, the wasm-bindgen class: open (device, first 64 KiB,
+//!   top of the index, roots), `frame` (navigation, scheduler, draw), input, camera.
+//!
+//! Decoding runs on the main thread between frames in this first step (at most
+//! 6 ms of it per frame; the cost per patch is in the frame statistics); fetching is
+//! asynchronous and never blocks a frame. A web worker for decoding is next.
+
+pub mod plan;
+
+#[cfg(target_arch = "wasm32")]
+mod http;
+#[cfg(target_arch = "wasm32")]
+mod viewer;
+
+#[cfg(target_arch = "wasm32")]
+pub use viewer::Viewer;
+
+/// Panics go to the browser console (with the message) instead of "unreachable".
+#[cfg(target_arch = "wasm32")]
+#[wasm_bindgen::prelude::wasm_bindgen(start)]
+pub fn start() {
+    std::panic::set_hook(Box::new(|info| {
+        web_sys::console::error_1(&format!("tessera: {info}").into());
+    }));
+}

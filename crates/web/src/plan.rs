@@ -1,0 +1,411 @@
+//! The browser client's fetch logic, independent of the browser (so it is tested
+//! natively): what to ask the server for and how to turn answers into the streaming
+//! core's [`Answer`]s.
+//!
+//! - [`SparseBytes`]: the parts of a remote model fetched so far, as a
+//!   [`ByteSource`] that records the first range it lacks. The index is read by the
+//!   native reader code ([`ModelIndex::read_top`], [`ModelIndex::grown`]) in a loop
+//!   ([`SparseBytes::attempt`]): run it, fetch the range it lacked, run it again. The
+//!   first request is the file's first [`PREFIX_BYTES`] (as `tessera-http`), which holds
+//!   the header, the block table and, for models of a few thousand nodes, the first
+//!   index page.
+//! - [`Fetcher`]: the patch requests. The scheduler's wants (replaced every frame) are
+//!   taken highest priority first; each request is the top node with the wanted nodes
+//!   beside it in the file (gaps up to [`COALESCE_MAX_GAP`], at most
+//!   [`COALESCE_MAX_PATCHES`] patches and [`COALESCE_MAX_BYTES`]: the rule of
+//!   `tessera-http`), at most [`MAX_IN_FLIGHT`] requests at once. Bodies wait until
+//!   [`Fetcher::drain`] decodes them (CRC checked, [`ModelIndex::decode_patch`]) within a
+//!   time budget per call, so a frame never waits for more than that much decoding.
+
+use std::cell::Cell;
+use std::collections::VecDeque;
+use std::ops::Range;
+use std::sync::Arc;
+
+use rustc_hash::{FxHashMap, FxHashSet};
+use tessera_format::{ByteSource, FormatError, ModelIndex};
+use tessera_stream::Answer;
+
+/// Bytes fetched by the first request of a model (as `tessera_http::PREFIX_BYTES`).
+pub const PREFIX_BYTES: u64 = 64 << 10;
+/// Most range requests in flight at once (as `tessera_http::MAX_IN_FLIGHT`).
+pub const MAX_IN_FLIGHT: usize = 3;
+/// Most patches one coalesced request fetches.
+pub const COALESCE_MAX_PATCHES: usize = 16;
+/// Most bytes one coalesced request fetches (a single larger patch gets its own).
+pub const COALESCE_MAX_BYTES: u64 = 512 << 10;
+/// Unwanted bytes between two wanted patches that a coalesced request may carry.
+pub const COALESCE_MAX_GAP: u64 = 4096;
+
+/// `bytes A-B/TOTAL` (or `bytes */TOTAL`) of a `Content-Range` header.
+pub fn parse_content_range(v: &str) -> Option<(Option<(u64, u64)>, u64)> {
+    let rest = v.trim().strip_prefix("bytes")?.trim_start();
+    let (span, total) = rest.split_once('/')?;
+    let total: u64 = total.trim().parse().ok()?;
+    if span.trim() == "*" {
+        return Some((None, total));
+    }
+    let (a, b) = span.trim().split_once('-')?;
+    Some((
+        Some((a.trim().parse().ok()?, b.trim().parse().ok()?)),
+        total,
+    ))
+}
+
+/// The `Range` header value for `range` (end exclusive, not empty).
+pub fn range_header(range: &Range<u64>) -> String {
+    format!("bytes={}-{}", range.start, range.end.saturating_sub(1))
+}
+
+/// Parts of a remote file fetched so far. See the module docs.
+pub struct SparseBytes {
+    len: u64,
+    chunks: Vec<(u64, Vec<u8>)>,
+    /// The first range a read lacked (start, end).
+    missing: Cell<Option<(u64, u64)>>,
+}
+
+impl std::fmt::Debug for SparseBytes {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SparseBytes")
+            .field("len", &self.len)
+            .field("chunks", &self.chunks.len())
+            .field("held_bytes", &self.held_bytes())
+            .finish()
+    }
+}
+
+/// What one run of reader code over [`SparseBytes`] came to.
+#[derive(Debug)]
+pub enum Attempt<T> {
+    Done(T),
+    /// It needs these bytes: fetch them, [`SparseBytes::insert`] them, run it again.
+    Need(Range<u64>),
+    Failed(FormatError),
+}
+
+impl SparseBytes {
+    /// A file of `len` bytes of which nothing is known yet.
+    pub fn new(len: u64) -> SparseBytes {
+        SparseBytes {
+            len,
+            chunks: Vec::new(),
+            missing: Cell::new(None),
+        }
+    }
+
+    /// Adds `bytes` fetched from offset `start`.
+    pub fn insert(&mut self, start: u64, bytes: Vec<u8>) {
+        self.chunks.push((start, bytes));
+    }
+
+    /// Bytes held (every chunk).
+    pub fn held_bytes(&self) -> u64 {
+        self.chunks.iter().map(|(_, b)| b.len() as u64).sum()
+    }
+
+    /// Runs `f` over what is held: its result, or the first range it lacked.
+    pub fn attempt<T>(&self, f: impl FnOnce(&SparseBytes) -> Result<T, FormatError>) -> Attempt<T> {
+        self.missing.set(None);
+        let r = f(self);
+        match (r, self.missing.take()) {
+            (Ok(v), _) => Attempt::Done(v),
+            (Err(_), Some((a, b))) => Attempt::Need(a..b),
+            (Err(e), None) => Attempt::Failed(e),
+        }
+    }
+}
+
+impl ByteSource for SparseBytes {
+    fn len(&self) -> u64 {
+        self.len
+    }
+
+    fn read(&self, range: Range<u64>) -> Result<std::borrow::Cow<'_, [u8]>, FormatError> {
+        if range.start > range.end || range.end > self.len {
+            return Err(FormatError::Truncated {
+                expected_bytes: range.end,
+                actual_bytes: self.len,
+            });
+        }
+        if range.is_empty() {
+            return Ok(std::borrow::Cow::Borrowed(&[]));
+        }
+        for (start, bytes) in &self.chunks {
+            let end = start + bytes.len() as u64;
+            if *start <= range.start && range.end <= end {
+                let a = (range.start - start) as usize;
+                let b = (range.end - start) as usize;
+                return Ok(std::borrow::Cow::Borrowed(&bytes[a..b]));
+            }
+        }
+        if self.missing.get().is_none() {
+            self.missing.set(Some((range.start, range.end)));
+        }
+        Err(FormatError::io(
+            "remote model",
+            std::io::Error::other(format!("bytes {range:?} not fetched yet")),
+        ))
+    }
+}
+
+/// One range request the fetcher wants sent.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Request {
+    /// Pass it back to [`Fetcher::complete`].
+    pub id: u64,
+    /// Bytes of the file (end exclusive).
+    pub range: Range<u64>,
+    /// Nodes whose patches lie in it, in file order.
+    pub nodes: Vec<u32>,
+}
+
+/// A fetched patch waiting to be decoded.
+struct Fetched {
+    node: u32,
+    body: Arc<Vec<u8>>,
+    at: Range<usize>,
+}
+
+/// Counters of a [`Fetcher`].
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FetchStats {
+    /// Range requests sent (the index's included when counted by the caller).
+    pub requests: u64,
+    /// Body bytes received for patches.
+    pub bytes: u64,
+    /// Patches decoded, and the time that took (milliseconds, main thread).
+    pub decoded: u64,
+    pub decode_ms: f64,
+    /// Largest time one patch took to decode, milliseconds.
+    pub decode_max_ms: f64,
+    /// Requests that failed (network, HTTP status): their nodes answered unavailable.
+    pub failed_requests: u64,
+}
+
+/// The patch requests of one model. See the module docs.
+pub struct Fetcher {
+    index: Arc<ModelIndex>,
+    /// Wanted nodes, highest priority first (the scheduler's order).
+    order: Vec<u32>,
+    wanted: FxHashSet<u32>,
+    /// Nodes in a request in flight or fetched and not decoded yet.
+    busy: FxHashSet<u32>,
+    requests: FxHashMap<u64, Vec<u32>>,
+    ready: VecDeque<Fetched>,
+    /// Answers settled without decoding (failed requests).
+    settled: Vec<Answer>,
+    next_id: u64,
+    stats: FetchStats,
+}
+
+impl Fetcher {
+    /// A fetcher for the model `index` describes (it may be a paged index read in part;
+    /// [`Fetcher::set_index`] takes a grown one).
+    pub fn new(index: Arc<ModelIndex>) -> Fetcher {
+        Fetcher {
+            index,
+            order: Vec::new(),
+            wanted: FxHashSet::default(),
+            busy: FxHashSet::default(),
+            requests: FxHashMap::default(),
+            ready: VecDeque::new(),
+            settled: Vec::new(),
+            next_id: 0,
+            stats: FetchStats::default(),
+        }
+    }
+
+    /// Takes a grown index of the same model.
+    pub fn set_index(&mut self, index: Arc<ModelIndex>) {
+        self.index = index;
+    }
+
+    /// Counters.
+    pub fn stats(&self) -> FetchStats {
+        self.stats
+    }
+
+    /// Replaces the wanted set (node, priority; larger first; first occurrence wins);
+    /// requests in flight are not cancelled (their answers still come).
+    pub fn set_wanted(&mut self, wanted: &[(u32, f32)]) {
+        let mut w: Vec<(u32, f32)> = wanted.to_vec();
+        // Stable: equal priorities keep the scheduler's order.
+        w.sort_by(|a, b| b.1.total_cmp(&a.1));
+        self.order.clear();
+        self.wanted.clear();
+        let shown = self.index.nodes().len() as u32;
+        for (n, _) in w {
+            if n < shown && self.wanted.insert(n) {
+                self.order.push(n);
+            }
+        }
+    }
+
+    /// Requests asked for and not answered yet (wanted or in flight).
+    pub fn pending(&self) -> usize {
+        self.wanted.len()
+            + self
+                .busy
+                .iter()
+                .filter(|n| !self.wanted.contains(n))
+                .count()
+    }
+
+    /// Requests in flight.
+    pub fn in_flight(&self) -> usize {
+        self.requests.len()
+    }
+
+    /// Fetched patches not decoded yet.
+    pub fn undecoded(&self) -> usize {
+        self.ready.len()
+    }
+
+    fn free(&self, n: u32) -> bool {
+        self.wanted.contains(&n) && !self.busy.contains(&n)
+    }
+
+    /// The next request to send, if fewer than [`MAX_IN_FLIGHT`] are in flight and a
+    /// wanted patch is not asked for yet: the top wanted node with the wanted nodes
+    /// beside it in the file.
+    pub fn next_request(&mut self) -> Option<Request> {
+        if self.requests.len() >= MAX_IN_FLIGHT {
+            return None;
+        }
+        let top = *self.order.iter().find(|&&n| self.free(n))?;
+        let range_of = |n: u32| self.index.patch_range(n as usize).ok();
+        let first = range_of(top)?;
+        let (mut lo, mut hi) = (top, top);
+        let (mut start, mut end) = (first.start, first.end);
+        let mut count = 1;
+        let shown = self.index.nodes().len() as u32;
+        // Forward: wanted patches after this one, across small gaps.
+        let mut j = hi + 1;
+        while j < shown && count < COALESCE_MAX_PATCHES {
+            let Some(r) = range_of(j) else { break };
+            if r.start.saturating_sub(end) > COALESCE_MAX_GAP || r.end - start > COALESCE_MAX_BYTES
+            {
+                break;
+            }
+            if self.busy.contains(&j) {
+                break;
+            }
+            if self.wanted.contains(&j) {
+                hi = j;
+                end = r.end;
+                count += 1;
+            }
+            j += 1;
+        }
+        // Backward, the same way.
+        let mut j = lo;
+        while j > 0 && count < COALESCE_MAX_PATCHES {
+            j -= 1;
+            let Some(r) = range_of(j) else { break };
+            if start.saturating_sub(r.end) > COALESCE_MAX_GAP || end - r.start > COALESCE_MAX_BYTES
+            {
+                break;
+            }
+            if self.busy.contains(&j) {
+                break;
+            }
+            if self.wanted.contains(&j) {
+                lo = j;
+                start = r.start;
+                count += 1;
+            }
+        }
+        let nodes: Vec<u32> = (lo..=hi).filter(|&n| self.wanted.contains(&n)).collect();
+        for &n in &nodes {
+            self.busy.insert(n);
+        }
+        let id = self.next_id;
+        self.next_id += 1;
+        self.requests.insert(id, nodes.clone());
+        self.stats.requests += 1;
+        Some(Request {
+            id,
+            range: start..end,
+            nodes,
+        })
+    }
+
+    /// The answer to request `id`: its body (exactly the bytes asked for), or why it
+    /// failed (the nodes are answered unavailable: the scheduler asks again after a
+    /// backoff).
+    pub fn complete(&mut self, id: u64, result: Result<Vec<u8>, String>) {
+        let Some(nodes) = self.requests.remove(&id) else {
+            return;
+        };
+        let ranges: Vec<Option<Range<u64>>> = nodes
+            .iter()
+            .map(|&n| self.index.patch_range(n as usize).ok())
+            .collect();
+        let start = ranges.iter().flatten().map(|r| r.start).min().unwrap_or(0);
+        let end = ranges.iter().flatten().map(|r| r.end).max().unwrap_or(0);
+        let result = result.and_then(|b| {
+            if b.len() as u64 == end - start {
+                Ok(b)
+            } else {
+                Err(format!(
+                    "body of {} bytes, expected {}",
+                    b.len(),
+                    end - start
+                ))
+            }
+        });
+        match result {
+            Ok(body) => {
+                self.stats.bytes += body.len() as u64;
+                let body = Arc::new(body);
+                for (&node, r) in nodes.iter().zip(ranges) {
+                    let r = r.expect("range checked above");
+                    self.ready.push_back(Fetched {
+                        node,
+                        body: body.clone(),
+                        at: (r.start - start) as usize..(r.end - start) as usize,
+                    });
+                }
+            }
+            Err(error) => {
+                self.stats.failed_requests += 1;
+                for node in nodes {
+                    self.busy.remove(&node);
+                    self.wanted.remove(&node);
+                    self.settled.push(Answer::Unavailable {
+                        node,
+                        error: error.clone(),
+                    });
+                }
+            }
+        }
+    }
+
+    /// Moves settled answers into `out` and decodes fetched patches, in arrival order,
+    /// until `budget_ms` of `clock` (milliseconds) have passed (at least one patch per
+    /// call). Returns the patches decoded.
+    pub fn drain(&mut self, out: &mut Vec<Answer>, budget_ms: f64, clock: fn() -> f64) -> usize {
+        out.append(&mut self.settled);
+        let t0 = clock();
+        let mut n = 0;
+        while let Some(f) = self.ready.pop_front() {
+            let t = clock();
+            let r = self
+                .index
+                .decode_patch(f.node as usize, &f.body[f.at.clone()]);
+            let ms = clock() - t;
+            self.stats.decoded += 1;
+            self.stats.decode_ms += ms;
+            self.stats.decode_max_ms = self.stats.decode_max_ms.max(ms);
+            self.busy.remove(&f.node);
+            self.wanted.remove(&f.node);
+            out.push(Answer::from_result(f.node, r));
+            n += 1;
+            if clock() - t0 >= budget_ms {
+                break;
+            }
+        }
+        n
+    }
+}

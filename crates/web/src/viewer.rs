@@ -1,0 +1,672 @@
+//! The browser viewer: one model from a URL, drawn into a canvas with WebGL2 through
+//! wgpu, by the same code as the desktop (see the crate docs). JavaScript owns the
+//! frame loop (`requestAnimationFrame` calls [`Viewer::frame`]) and the DOM events
+//! (forwarded to [`Viewer::pointer_down`] and friends, in canvas pixels).
+
+use std::cell::{Cell, RefCell};
+use std::rc::Rc;
+use std::sync::Arc;
+
+use glam::DVec3;
+use serde_json::{json, Value};
+use tessera_format::{Grid, ModelIndex, ATTR_COLORS};
+use tessera_nav::{Aabb, Navigator};
+use tessera_render::{clip_planes_along, FrameParams, Gpu, GpuCache, GpuStore, Renderer, Shading};
+use tessera_select::Camera;
+use tessera_stream::{Answer, FrameStats, PatchSource, Scheduler, SchedulerOptions};
+use wasm_bindgen::prelude::*;
+use wasm_bindgen_futures::spawn_local;
+
+use crate::http::{Http, HttpError};
+use crate::plan::{Attempt, Fetcher, SparseBytes, PREFIX_BYTES};
+
+/// Most time one frame spends decoding fetched patches (main thread), milliseconds.
+/// Decoding runs between frames on the main thread in this first step (the web worker
+/// is next); the per-patch cost is in the statistics (`decode_ms_mean`).
+const DECODE_BUDGET_MS: f64 = 6.0;
+/// Index pages read at open (as `tessera_http::TOP_PAGES`).
+const TOP_PAGES: u64 = 1;
+/// Root vertices kept to frame the home view (as the desktop viewer).
+const HOME_POINTS: usize = 20_000;
+
+/// Milliseconds from the page's time origin (`performance.now()`).
+pub fn now_ms() -> f64 {
+    thread_local! {
+        static PERF: Option<web_sys::Performance> = js_sys::global()
+            .dyn_into::<web_sys::Window>()
+            .ok()
+            .and_then(|w| w.performance());
+    }
+    PERF.with(|p| p.as_ref().map_or_else(js_sys::Date::now, |p| p.now()))
+}
+
+fn err(msg: impl std::fmt::Display) -> JsError {
+    JsError::new(&msg.to_string())
+}
+
+/// Reads with `f` over `sparse`, fetching what it lacks, until it is done.
+async fn read_with<T>(
+    http: &Http,
+    sparse: &RefCell<SparseBytes>,
+    f: impl Fn(&SparseBytes) -> Result<T, tessera_format::FormatError>,
+) -> Result<T, String> {
+    for _ in 0..64 {
+        let step = sparse.borrow().attempt(&f);
+        match step {
+            Attempt::Done(v) => return Ok(v),
+            Attempt::Failed(e) => return Err(e.to_string()),
+            Attempt::Need(r) => {
+                let body = http
+                    .get(r.clone(), false)
+                    .await
+                    .map_err(|e| e.message().to_string())?;
+                sparse.borrow_mut().insert(r.start, body);
+            }
+        }
+    }
+    Err("the index asked for more than 64 reads".into())
+}
+
+/// The patch source: range requests through [`Fetcher`] (coalesced, at most 3 in
+/// flight), decoded between frames.
+struct Remote {
+    http: Rc<Http>,
+    fetcher: Rc<RefCell<Fetcher>>,
+    /// An error that stops streaming (the model changed on the server).
+    fatal: Rc<RefCell<Option<String>>>,
+    closed: Rc<Cell<bool>>,
+    /// The roots, fetched and decoded while opening (answered by `read_now`).
+    roots: Vec<Answer>,
+}
+
+impl Remote {
+    /// Sends what the fetcher wants sent; each answer sends more.
+    fn pump(&self) {
+        pump(&self.http, &self.fetcher, &self.fatal, &self.closed);
+    }
+}
+
+fn pump(
+    http: &Rc<Http>,
+    fetcher: &Rc<RefCell<Fetcher>>,
+    fatal: &Rc<RefCell<Option<String>>>,
+    closed: &Rc<Cell<bool>>,
+) {
+    if closed.get() || fatal.borrow().is_some() {
+        return;
+    }
+    loop {
+        let Some(req) = fetcher.borrow_mut().next_request() else {
+            break;
+        };
+        let (http, fetcher, fatal, closed) =
+            (http.clone(), fetcher.clone(), fatal.clone(), closed.clone());
+        spawn_local(async move {
+            let r = http.get(req.range.clone(), false).await;
+            if closed.get() {
+                return;
+            }
+            let r = match r {
+                Ok(body) => Ok(body),
+                Err(HttpError::Fatal(m)) => {
+                    *fatal.borrow_mut() = Some(m.clone());
+                    Err(m)
+                }
+                Err(HttpError::Transient(m)) => Err(m),
+            };
+            fetcher.borrow_mut().complete(req.id, r);
+            pump(&http, &fetcher, &fatal, &closed);
+        });
+    }
+}
+
+impl PatchSource for Remote {
+    fn request(&mut self, wanted: &[(u32, f32)]) {
+        self.fetcher.borrow_mut().set_wanted(wanted);
+        self.pump();
+    }
+    fn poll(&mut self, out: &mut Vec<Answer>) {
+        self.fetcher
+            .borrow_mut()
+            .drain(out, DECODE_BUDGET_MS, now_ms);
+        self.pump();
+    }
+    fn pending(&self) -> usize {
+        self.fetcher.borrow().pending()
+    }
+    fn read_now(&mut self, nodes: &[u32]) -> Option<Vec<Answer>> {
+        // Only the roots, once: they were fetched before the viewer was made.
+        let roots = std::mem::take(&mut self.roots);
+        (!roots.is_empty() && roots.len() == nodes.len()).then_some(roots)
+    }
+}
+
+/// A view of one remote model in a canvas. See the module docs.
+#[wasm_bindgen]
+pub struct Viewer {
+    gpu: Gpu,
+    surface: wgpu::Surface<'static>,
+    config: wgpu::SurfaceConfiguration,
+    renderer: Renderer,
+    cache: GpuCache,
+    depth: wgpu::TextureView,
+    scheduler: Scheduler,
+    source: Remote,
+    index: Arc<ModelIndex>,
+    sparse: Rc<RefCell<SparseBytes>>,
+    /// A grown index (or why growing failed), taken by the next frame.
+    grown: Rc<RefCell<Option<Result<ModelIndex, String>>>>,
+    growing: Rc<Cell<bool>>,
+    /// No growth before this time (after a failure), milliseconds.
+    grow_after_ms: f64,
+    nav: Navigator,
+    quant_step: f64,
+    has_colors: bool,
+    last_ms: Option<f64>,
+    stats: FrameStats,
+    converged: bool,
+    dirty: bool,
+    drag: Option<i16>,
+    pointer: (f64, f64),
+    opened_ms: f64,
+    /// Milliseconds from `open` to the first frame drawn (the roots) and to the first
+    /// converged frame.
+    first_frame_ms: Option<f64>,
+    converged_ms: Option<f64>,
+    index_bytes: u64,
+    frames: u64,
+}
+
+impl Drop for Viewer {
+    fn drop(&mut self) {
+        // Requests in flight finish into nothing; no new ones start.
+        self.source.closed.set(true);
+    }
+}
+
+fn depth_view(device: &wgpu::Device, w: u32, h: u32) -> wgpu::TextureView {
+    device
+        .create_texture(&wgpu::TextureDescriptor {
+            label: Some("tessera web depth"),
+            size: wgpu::Extent3d {
+                width: w,
+                height: h,
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: tessera_render::DEPTH_FORMAT,
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
+            view_formats: &[],
+        })
+        .create_view(&Default::default())
+}
+
+fn parse_camera(json: &str) -> Result<Camera, JsError> {
+    Camera::from_json_str(json).map_err(|e| err(format!("camera: {e}")))
+}
+
+#[wasm_bindgen]
+impl Viewer {
+    /// Opens the model at `url` in `canvas` (its current pixel size). `options` is a
+    /// JSON object: `tolerancePx` (default 1), `memoryBytes` (default 512 MiB: half for
+    /// the GPU cache, a quarter for decoded patches, as `tessera render --memory`),
+    /// `camera` (a camera of docs/camera.md; default the home view framed by the roots).
+    /// Errors carry a message meant for the page.
+    pub async fn open(
+        canvas: web_sys::HtmlCanvasElement,
+        url: String,
+        options: String,
+    ) -> Result<Viewer, JsError> {
+        let opened_ms = now_ms();
+        let opts: Value =
+            serde_json::from_str(&options).map_err(|e| err(format!("options: {e}")))?;
+        let tolerance_px = opts["tolerancePx"].as_f64().unwrap_or(1.0) as f32;
+        let memory = opts["memoryBytes"].as_f64().unwrap_or(512.0 * 1048576.0) as u64;
+        let camera = match &opts["camera"] {
+            Value::Null => None,
+            v => Some(Camera::from_json_value(v).map_err(|e| err(format!("camera: {e}")))?),
+        };
+        let (w, h) = (canvas.width().max(1), canvas.height().max(1));
+
+        // The device: WebGL2 (see ARCHITECTURE.md for why not WebGPU).
+        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+        desc.backends = wgpu::Backends::GL;
+        let instance = wgpu::Instance::new(desc);
+        let no_webgl = |e: &dyn std::fmt::Display| {
+            err(format!(
+                "this browser cannot draw with WebGL2 ({e}): enable WebGL or hardware \
+                 acceleration, or use a browser that has it"
+            ))
+        };
+        let surface = instance
+            .create_surface(wgpu::SurfaceTarget::Canvas(canvas))
+            .map_err(|e| no_webgl(&e))?;
+        let gpu = Gpu::with_instance_async(instance, Some(&surface))
+            .await
+            .map_err(|e| no_webgl(&e))?;
+        let caps = surface.get_capabilities(&gpu.adapter);
+        // The frame is shown as the patch shader writes it (no sRGB encoding), as the
+        // native PNGs store it.
+        let format = caps
+            .formats
+            .iter()
+            .copied()
+            .find(|f| !f.is_srgb())
+            .or_else(|| caps.formats.first().copied())
+            .ok_or_else(|| err("the canvas offers no colour format"))?;
+        let config = wgpu::SurfaceConfiguration {
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
+            format,
+            width: w,
+            height: h,
+            present_mode: wgpu::PresentMode::Fifo,
+            desired_maximum_frame_latency: 2,
+            alpha_mode: caps
+                .alpha_modes
+                .first()
+                .copied()
+                .unwrap_or(wgpu::CompositeAlphaMode::Auto),
+            view_formats: vec![],
+            color_space: wgpu::SurfaceColorSpace::Auto,
+        };
+        surface.configure(&gpu.device, &config);
+
+        // The model: its first 64 KiB, the top of its index, its roots.
+        let http = Rc::new(Http::new(&url));
+        let prefix = http
+            .open(PREFIX_BYTES)
+            .await
+            .map_err(|e| err(e.message()))?;
+        let sparse = Rc::new(RefCell::new(SparseBytes::new(http.len())));
+        sparse.borrow_mut().insert(0, prefix);
+        let cannot = |m: String| err(format!("cannot open {url}: {m}"));
+        let index = read_with(&http, &sparse, |s| ModelIndex::read_top(s, TOP_PAGES))
+            .await
+            .map_err(cannot)?;
+        let index_bytes = http.bytes.get();
+        let root_count = (index.header().root_count as usize).min(index.nodes().len());
+        let roots_range = match root_count {
+            0 => return Err(cannot("the model has no roots".into())),
+            n => {
+                let a = index.patch_range(0).map_err(|e| cannot(e.to_string()))?;
+                let b = index
+                    .patch_range(n - 1)
+                    .map_err(|e| cannot(e.to_string()))?;
+                a.start..b.end
+            }
+        };
+        let body = read_with(&http, &sparse, |s| {
+            use tessera_format::ByteSource;
+            s.read(roots_range.clone()).map(|b| b.into_owned())
+        })
+        .await
+        .map_err(cannot)?;
+        let grid = Grid::of_header(index.header());
+        let mut points = Vec::new();
+        let mut roots = Vec::new();
+        for n in 0..root_count {
+            let r = index.patch_range(n).map_err(|e| cannot(e.to_string()))?;
+            let at = (r.start - roots_range.start) as usize..(r.end - roots_range.start) as usize;
+            let p = index.decode_patch(n, &body[at]);
+            if let Ok(p) = &p {
+                points.extend(p.positions.iter().map(|&q| DVec3::from(grid.position(q))));
+            }
+            roots.push(Answer::from_result(n as u32, p));
+        }
+        if points.is_empty() {
+            let b = index.header().bounding_sphere;
+            let c = DVec3::new(b[0], b[1], b[2]);
+            points = vec![c - DVec3::splat(b[3]), c + DVec3::splat(b[3])];
+        }
+
+        // Navigation as on the desktop: the home view framed by the roots' extent,
+        // up guessed from it.
+        let (min, max) = points.iter().fold(
+            (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+            |(lo, hi), &p| (lo.min(p), hi.max(p)),
+        );
+        let up = tessera_nav::guess_up(min.to_array(), max.to_array());
+        let mut nav = Navigator::new(Aabb::new(min, max), up, w, h);
+        let stride = points.len().div_ceil(HOME_POINTS).max(1);
+        let home: Vec<DVec3> = points.iter().step_by(stride).copied().collect();
+        nav.home_points(&home);
+        nav.set_min_distance(grid.step() * 4.0);
+        if let Some(cam) = &camera {
+            nav.set_camera(cam)
+                .map_err(|e| err(format!("camera: {e}")))?;
+            nav.resize(w, h);
+        }
+
+        let index = Arc::new(index);
+        let mut renderer = Renderer::new(&gpu.device, format);
+        renderer.set_base_vertex(gpu.base_vertex());
+        let has_colors = index.header().attributes & ATTR_COLORS != 0;
+        renderer.has_colors = has_colors;
+        let mut cache = GpuCache::new(&gpu.device, memory / 2);
+        cache.set_levels(0, index.nodes().iter().map(|n| n.level).collect());
+        let mut scheduler = Scheduler::new(
+            &index,
+            SchedulerOptions {
+                tolerance_px,
+                store_budget_bytes: memory / 2,
+                ram_budget_bytes: memory / 4,
+                clock: now_ms,
+                ..SchedulerOptions::default()
+            },
+        );
+        let mut source = Remote {
+            http,
+            fetcher: Rc::new(RefCell::new(Fetcher::new(index.clone()))),
+            fatal: Rc::new(RefCell::new(None)),
+            closed: Rc::new(Cell::new(false)),
+            roots,
+        };
+        let quant_step = grid.step();
+        {
+            let mut store = GpuStore {
+                cache: &mut cache,
+                device: &gpu.device,
+                queue: &gpu.queue,
+                quant_step,
+                model: 0,
+            };
+            scheduler.load_roots(&mut source, &mut store);
+        }
+        let depth = depth_view(&gpu.device, w, h);
+        Ok(Viewer {
+            gpu,
+            surface,
+            config,
+            renderer,
+            cache,
+            depth,
+            scheduler,
+            source,
+            index,
+            sparse,
+            grown: Rc::new(RefCell::new(None)),
+            growing: Rc::new(Cell::new(false)),
+            grow_after_ms: 0.0,
+            nav,
+            quant_step,
+            has_colors,
+            last_ms: None,
+            stats: FrameStats::default(),
+            converged: false,
+            dirty: true,
+            drag: None,
+            pointer: (0.0, 0.0),
+            opened_ms,
+            first_frame_ms: None,
+            converged_ms: None,
+            index_bytes,
+            frames: 0,
+        })
+    }
+
+    /// One frame at `time_ms` (`requestAnimationFrame`'s time): navigation, the
+    /// scheduler (answers in, requests out, uploads), and a draw when anything changed.
+    /// Returns the statistics as JSON (see `web/tessera.js`); a fatal streaming error
+    /// comes back as an exception.
+    pub fn frame(&mut self, time_ms: f64) -> Result<String, JsError> {
+        if let Some(m) = self.source.fatal.borrow().as_ref() {
+            return Err(err(m));
+        }
+        let dt = self.last_ms.map_or(0.0, |t| ((time_ms - t) / 1e3).max(0.0));
+        self.last_ms = Some(time_ms);
+        let moving = self.nav.needs_update() || self.drag.is_some();
+        self.nav.update(dt);
+        // A paged index read further: select over more of it.
+        let grown = self.grown.borrow_mut().take();
+        match grown {
+            Some(Ok(ix)) if ix.nodes().len() > self.index.nodes().len() => {
+                let ix = Arc::new(ix);
+                self.cache
+                    .set_levels(0, ix.nodes().iter().map(|n| n.level).collect());
+                let mut store = GpuStore {
+                    cache: &mut self.cache,
+                    device: &self.gpu.device,
+                    queue: &self.gpu.queue,
+                    quant_step: self.quant_step,
+                    model: 0,
+                };
+                self.scheduler.set_index(&ix, &mut store);
+                self.source.fetcher.borrow_mut().set_index(ix.clone());
+                self.index = ix;
+                self.dirty = true;
+            }
+            Some(Err(e)) => {
+                web_sys::console::warn_1(
+                    &format!("tessera: reading more of the index: {e}").into(),
+                );
+                self.grow_after_ms = time_ms + 2000.0;
+            }
+            _ => {}
+        }
+        let idle = self.converged && !moving && !self.dirty;
+        if !idle {
+            let camera = self.nav.camera();
+            let mut store = GpuStore {
+                cache: &mut self.cache,
+                device: &self.gpu.device,
+                queue: &self.gpu.queue,
+                quant_step: self.quant_step,
+                model: 0,
+            };
+            self.stats = self
+                .scheduler
+                .frame(&camera, time_ms / 1e3, &mut self.source, &mut store);
+            if self.stats.index_wants > 0
+                && !self.growing.get()
+                && !self.index.is_complete()
+                && time_ms >= self.grow_after_ms
+            {
+                self.grow_index();
+            }
+            self.draw(&camera);
+            self.frames += 1;
+            if self.first_frame_ms.is_none() && self.stats.selected_nodes > 0 {
+                self.first_frame_ms = Some(now_ms() - self.opened_ms);
+            }
+            self.dirty = false;
+        }
+        let fetch = self.source.fetcher.borrow();
+        let converged = self.stats.pending_loads == 0
+            && self.stats.cache_misses == 0
+            && self.stats.index_wants == 0
+            && fetch.pending() == 0
+            && fetch.undecoded() == 0
+            && !self.growing.get()
+            && !self.nav.needs_update()
+            && self.drag.is_none()
+            && self.first_frame_ms.is_some();
+        self.converged = converged;
+        if converged && self.converged_ms.is_none() {
+            self.converged_ms = Some(now_ms() - self.opened_ms);
+        }
+        let f = fetch.stats();
+        let s = &self.stats;
+        Ok(json!({
+            "idle": converged,
+            "drew": !idle,
+            "frame": self.frames,
+            "nodes": s.selected_nodes,
+            "triangles": s.triangles,
+            "max_level": s.max_level,
+            "pending": s.pending_loads,
+            "in_flight": fetch.in_flight(),
+            "undecoded": fetch.undecoded(),
+            "bytes_received": self.source.http.bytes.get(),
+            "index_bytes": self.index_bytes,
+            "requests": self.source.http.requests.get(),
+            "failed_requests": f.failed_requests,
+            "failed_patches": s.failed_patches,
+            "index_nodes": self.index.nodes().len(),
+            "model_nodes": self.index.header().node_count,
+            "gpu_bytes": s.gpu_resident_bytes,
+            "gpu_budget_bytes": s.gpu_budget_bytes,
+            "ram_bytes": s.ram_resident_bytes,
+            "selection_ms": s.selection_ms,
+            "decoded": f.decoded,
+            "decode_ms_mean": if f.decoded > 0 { f.decode_ms / f.decoded as f64 } else { 0.0 },
+            "decode_ms_max": f.decode_max_ms,
+            "first_frame_ms": self.first_frame_ms,
+            "converged_ms": self.converged_ms,
+            "adapter": self.gpu.adapter_label,
+        })
+        .to_string())
+    }
+
+    fn draw(&mut self, camera: &Camera) {
+        let frame = match self.surface.get_current_texture() {
+            wgpu::CurrentSurfaceTexture::Success(t)
+            | wgpu::CurrentSurfaceTexture::Suboptimal(t) => t,
+            wgpu::CurrentSurfaceTexture::Outdated | wgpu::CurrentSurfaceTexture::Lost => {
+                self.surface.configure(&self.gpu.device, &self.config);
+                self.dirty = true;
+                return;
+            }
+            _ => {
+                self.dirty = true;
+                return;
+            }
+        };
+        let view = frame.texture.create_view(&Default::default());
+        // Near and far fitted to the drawn nodes' tight spheres, as the desktop viewer.
+        let origin = DVec3::from(self.index.header().cube_origin);
+        let nodes = self.index.nodes();
+        let spheres = self.scheduler.draw().iter().filter_map(|&n| {
+            let s = nodes.get(n as usize)?.tight_sphere;
+            let c = origin + DVec3::new(f64::from(s[0]), f64::from(s[1]), f64::from(s[2]));
+            Some((
+                c,
+                f64::from(s[3]) * (1.0 + 1e-6) + c.abs().max_element() * 1e-6,
+            ))
+        });
+        let planes = clip_planes_along(
+            DVec3::from(camera.position),
+            camera.basis().forward,
+            spheres,
+        );
+        let params = FrameParams::with_planes(
+            camera,
+            self.index.header().cube_origin,
+            planes,
+            Shading::default(),
+        );
+        self.renderer
+            .set_model_frame(&self.gpu.queue, 0, &params, self.has_colors);
+        let mut enc = self
+            .gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("tessera web frame"),
+            });
+        let cache = &self.cache;
+        let slots = self.scheduler.draw().iter().filter_map(|&n| cache.slot(n));
+        self.renderer
+            .encode_pass(&mut enc, &view, &self.depth, cache, slots, true);
+        self.gpu.queue.submit([enc.finish()]);
+        self.gpu.queue.present(frame);
+    }
+
+    /// Reads more of the paged index (doubling the pages read), off the frame.
+    fn grow_index(&mut self) {
+        self.growing.set(true);
+        let (http, sparse, grown, growing) = (
+            self.source.http.clone(),
+            self.sparse.clone(),
+            self.grown.clone(),
+            self.growing.clone(),
+        );
+        let base = self.index.clone();
+        let closed = self.source.closed.clone();
+        spawn_local(async move {
+            let pages = (2 * base.loaded_pages()).max(1);
+            let r = read_with(&http, &sparse, |s| base.grown(s, pages)).await;
+            if !closed.get() {
+                *grown.borrow_mut() = Some(r);
+            }
+            growing.set(false);
+        });
+    }
+
+    /// The canvas was resized to `width` x `height` pixels.
+    pub fn resize(&mut self, width: u32, height: u32) {
+        let (w, h) = (width.max(1), height.max(1));
+        if (w, h) == (self.config.width, self.config.height) {
+            return;
+        }
+        self.config.width = w;
+        self.config.height = h;
+        self.surface.configure(&self.gpu.device, &self.config);
+        self.depth = depth_view(&self.gpu.device, w, h);
+        self.nav.resize(w, h);
+        self.dirty = true;
+    }
+
+    /// The current camera as JSON (docs/camera.md), sized as the canvas.
+    pub fn camera(&self) -> String {
+        self.nav.camera().to_json_string()
+    }
+
+    /// Moves to `json` (a camera of docs/camera.md); the image keeps the canvas's size.
+    pub fn set_camera(&mut self, json: &str) -> Result<(), JsError> {
+        let cam = parse_camera(json)?;
+        self.nav
+            .set_camera(&cam)
+            .map_err(|e| err(format!("camera: {e}")))?;
+        self.nav.resize(self.config.width, self.config.height);
+        self.dirty = true;
+        Ok(())
+    }
+
+    /// Back to the home view.
+    pub fn reset(&mut self) {
+        self.nav.reset();
+        self.dirty = true;
+    }
+
+    /// Changes the screen-space tolerance (pixels).
+    pub fn set_tolerance_px(&mut self, tolerance_px: f32) {
+        self.scheduler.set_tolerance_px(tolerance_px);
+        self.dirty = true;
+    }
+
+    /// A mouse button went down at (`x`, `y`) canvas pixels: 0 left (orbit; with
+    /// `pan`, pan), 1 middle and 2 right (pan).
+    pub fn pointer_down(&mut self, button: i16, x: f64, y: f64, pan: bool) {
+        self.nav.press();
+        self.drag = Some(if pan && button == 0 { 2 } else { button });
+        self.pointer = (x, y);
+        self.dirty = true;
+    }
+
+    /// The pointer moved to (`x`, `y`) canvas pixels.
+    pub fn pointer_move(&mut self, x: f64, y: f64) {
+        let (dx, dy) = (x - self.pointer.0, y - self.pointer.1);
+        self.pointer = (x, y);
+        match self.drag {
+            Some(0) => self.nav.drag_orbit(dx, dy),
+            Some(_) => self.nav.drag_pan(dx, dy),
+            None => return,
+        }
+        self.dirty = true;
+    }
+
+    /// The button went up (inertia may carry the motion on).
+    pub fn pointer_up(&mut self) {
+        if self.drag.take().is_some() {
+            self.nav.release();
+            self.dirty = true;
+        }
+    }
+
+    /// Wheel steps (positive zooms in), toward the pivot.
+    pub fn wheel(&mut self, steps: f64) {
+        self.nav.zoom(steps, None);
+        self.dirty = true;
+    }
+}

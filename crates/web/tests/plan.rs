@@ -1,0 +1,318 @@
+//! The browser client's fetch plan, natively: the index read through a sparse byte
+//! source equals the index read from the whole file; patches fetched in coalesced range
+//! requests (at most 3 in flight, at most 16 patches / 512 KiB each) and answered out of
+//! order stream a real model to the same converged cut as a source that answers at
+//! once; failed requests come back as unavailable and are asked again.
+
+use std::ops::Range;
+use std::sync::Arc;
+
+use tessera_format::ModelIndex;
+use tessera_select::{Camera, Orbit};
+use tessera_stream::{Answer, CountingStore, PatchSource, Scheduler, SchedulerOptions};
+use tessera_web::plan::{
+    parse_content_range, range_header, Attempt, Fetcher, Request, SparseBytes, COALESCE_MAX_BYTES,
+    COALESCE_MAX_PATCHES, MAX_IN_FLIGHT, PREFIX_BYTES,
+};
+
+/// A generated sphere built with small nodes and small index pages (a deep tree whose
+/// index is read in several steps).
+fn model(dir: &std::path::Path) -> Vec<u8> {
+    let ply = dir.join("s.ply");
+    let tsr = dir.join("s.tsr");
+    tessera_gen::write_sphere(
+        &ply,
+        &tessera_gen::SphereOptions {
+            triangles: 60_000,
+            ..Default::default()
+        },
+        &tessera_gen::NoProgress,
+    )
+    .unwrap();
+    let opts = tessera_build::BuildOptions {
+        leaf_triangles: 400,
+        node_triangles: 200,
+        index_page_nodes: 16,
+        threads: Some(2),
+        ..Default::default()
+    };
+    tessera_build::build(&ply, &tsr, &opts, &tessera_build::NoProgress).unwrap();
+    std::fs::read(&tsr).unwrap()
+}
+
+/// Runs `f` over a sparse copy of `file`, fetching what it lacks; returns the result
+/// and the ranges fetched.
+fn read_sparse<T>(
+    file: &[u8],
+    sparse: &mut SparseBytes,
+    f: impl Fn(&SparseBytes) -> Result<T, tessera_format::FormatError>,
+) -> (T, Vec<Range<u64>>) {
+    let mut fetched = Vec::new();
+    loop {
+        match sparse.attempt(&f) {
+            Attempt::Done(v) => return (v, fetched),
+            Attempt::Failed(e) => panic!("read failed: {e}"),
+            Attempt::Need(r) => {
+                assert!(fetched.len() < 16, "too many reads: {fetched:?}");
+                sparse.insert(r.start, file[r.start as usize..r.end as usize].to_vec());
+                fetched.push(r);
+            }
+        }
+    }
+}
+
+#[test]
+fn content_range_and_range_headers() {
+    assert_eq!(
+        parse_content_range("bytes 0-65535/1000000"),
+        Some((Some((0, 65535)), 1000000))
+    );
+    assert_eq!(parse_content_range("bytes */42"), Some((None, 42)));
+    assert_eq!(parse_content_range("items 0-1/2"), None);
+    assert_eq!(range_header(&(10..20)), "bytes=10-19");
+}
+
+#[test]
+fn index_read_through_sparse_bytes_equals_the_whole_file_s() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = model(dir.path());
+    let whole = ModelIndex::read(file.as_slice()).unwrap();
+    let top_direct = ModelIndex::read_top(file.as_slice(), 1).unwrap();
+
+    let mut sparse = SparseBytes::new(file.len() as u64);
+    let prefix = (PREFIX_BYTES as usize).min(file.len());
+    sparse.insert(0, file[..prefix].to_vec());
+    let (top, fetched) = read_sparse(&file, &mut sparse, |s| ModelIndex::read_top(s, 1));
+    assert_eq!(top.nodes(), top_direct.nodes());
+    assert!(top.nodes().len() < whole.nodes().len(), "the top is a part");
+    eprintln!(
+        "top: {} of {} nodes, {} extra reads after the {prefix}-byte prefix",
+        top.nodes().len(),
+        whole.nodes().len(),
+        fetched.len()
+    );
+    // Grown page by page (doubling) to the whole index.
+    let mut ix = top;
+    let mut steps = 0;
+    while !ix.is_complete() {
+        let pages = 2 * ix.loaded_pages();
+        let (next, _) = read_sparse(&file, &mut sparse, |s| ix.grown(s, pages));
+        assert!(next.nodes().len() >= ix.nodes().len());
+        ix = next;
+        steps += 1;
+        assert!(steps < 40);
+    }
+    assert_eq!(ix.nodes(), whole.nodes());
+
+    // A real error (not missing bytes) is reported as such.
+    let mut bad = file.clone();
+    bad[0] ^= 0xff;
+    let mut sparse = SparseBytes::new(bad.len() as u64);
+    sparse.insert(0, bad[..prefix].to_vec());
+    match sparse.attempt(|s| ModelIndex::read_top(s, 1)) {
+        Attempt::Failed(e) => assert!(e.to_string().contains("magic"), "{e}"),
+        other => panic!("expected a failure, got {other:?}"),
+    }
+}
+
+/// The fetcher as the scheduler's source, with a fake transport that answers requests
+/// in reverse order one frame later, failing every `fail_every`-th.
+struct Fake<'a> {
+    file: &'a [u8],
+    fetcher: Fetcher,
+    in_flight: Vec<Request>,
+    sent: Vec<Request>,
+    fail_every: u64,
+}
+
+impl Fake<'_> {
+    fn pump(&mut self) {
+        while let Some(r) = self.fetcher.next_request() {
+            assert!(self.fetcher.in_flight() <= MAX_IN_FLIGHT);
+            self.sent.push(r.clone());
+            self.in_flight.push(r);
+        }
+    }
+    fn deliver(&mut self) {
+        while let Some(r) = self.in_flight.pop() {
+            let body = if self.fail_every > 0 && r.id % self.fail_every == self.fail_every - 1 {
+                Err("connection reset".to_string())
+            } else {
+                Ok(self.file[r.range.start as usize..r.range.end as usize].to_vec())
+            };
+            self.fetcher.complete(r.id, body);
+        }
+    }
+}
+
+impl PatchSource for Fake<'_> {
+    fn request(&mut self, wanted: &[(u32, f32)]) {
+        self.fetcher.set_wanted(wanted);
+        self.pump();
+    }
+    fn poll(&mut self, out: &mut Vec<Answer>) {
+        self.deliver();
+        self.fetcher.drain(out, 1e9, || 0.0);
+        self.pump();
+    }
+    fn pending(&self) -> usize {
+        self.fetcher.pending()
+    }
+}
+
+/// A source answering every request at the next poll from the bytes.
+struct Direct<'a> {
+    index: &'a ModelIndex,
+    file: &'a [u8],
+    wanted: Vec<u32>,
+}
+
+impl PatchSource for Direct<'_> {
+    fn request(&mut self, wanted: &[(u32, f32)]) {
+        self.wanted = wanted.iter().map(|w| w.0).collect();
+    }
+    fn poll(&mut self, out: &mut Vec<Answer>) {
+        for n in self.wanted.drain(..) {
+            out.push(Answer::from_result(
+                n,
+                self.index.read_patch(self.file, n as usize),
+            ));
+        }
+    }
+    fn pending(&self) -> usize {
+        self.wanted.len()
+    }
+}
+
+fn camera(index: &ModelIndex) -> Camera {
+    let b = index.header().bounding_sphere;
+    Camera::orbit(&Orbit {
+        center: [b[0], b[1], b[2]],
+        radius: b[3] * 1.6,
+        azimuth_deg: 30.0,
+        elevation_deg: 20.0,
+        width: 640,
+        height: 480,
+        ..Orbit::default()
+    })
+    .unwrap()
+}
+
+fn converge<S: PatchSource>(index: &ModelIndex, src: &mut S) -> (Vec<u32>, u32) {
+    let mut sched = Scheduler::new(
+        index,
+        SchedulerOptions {
+            prefetch: false,
+            clock: || 0.0,
+            ..Default::default()
+        },
+    );
+    let mut store = CountingStore::default();
+    let cam = camera(index);
+    for f in 0..400u32 {
+        let st = sched.frame(&cam, f as f64 / 60.0, src, &mut store);
+        if f > 2 && st.pending_loads == 0 && st.cache_misses == 0 {
+            let mut d = sched.draw().to_vec();
+            d.sort_unstable();
+            return (d, f);
+        }
+    }
+    panic!("did not converge in 400 frames");
+}
+
+#[test]
+fn coalesced_out_of_order_fetches_converge_to_the_direct_cut() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = model(dir.path());
+    let index = Arc::new(ModelIndex::read(file.as_slice()).unwrap());
+
+    let (direct, direct_frames) = converge(
+        &index,
+        &mut Direct {
+            index: &index,
+            file: &file,
+            wanted: Vec::new(),
+        },
+    );
+    let mut fake = Fake {
+        file: &file,
+        fetcher: Fetcher::new(index.clone()),
+        in_flight: Vec::new(),
+        sent: Vec::new(),
+        fail_every: 0,
+    };
+    let (fetched, frames) = converge(&index, &mut fake);
+    assert_eq!(fetched, direct, "the fetched cut differs");
+    assert!(direct.len() > 50, "a deep cut: {} nodes", direct.len());
+    let sent = &fake.sent;
+    let patches: usize = sent.iter().map(|r| r.nodes.len()).sum();
+    for r in sent {
+        assert!(r.nodes.len() <= COALESCE_MAX_PATCHES);
+        assert!(r.nodes.len() == 1 || r.range.end - r.range.start <= COALESCE_MAX_BYTES);
+        // The range covers exactly its nodes' patches, first to last.
+        let first = index.patch_range(r.nodes[0] as usize).unwrap();
+        let last = index
+            .patch_range(*r.nodes.last().unwrap() as usize)
+            .unwrap();
+        assert_eq!(r.range, first.start..last.end);
+    }
+    assert!(
+        sent.len() * 3 < patches,
+        "coalescing: {} requests for {patches} patches",
+        sent.len()
+    );
+    let s = fake.fetcher.stats();
+    assert_eq!(s.decoded as usize, patches);
+    eprintln!(
+        "{patches} patches in {} requests, {} frames (direct: {direct_frames}), {} bytes",
+        sent.len(),
+        frames,
+        s.bytes
+    );
+
+    // Every third request fails: those nodes come back unavailable and are asked again
+    // after the scheduler's backoff; with a clock that moves, the cut still converges.
+    let mut flaky = Fake {
+        file: &file,
+        fetcher: Fetcher::new(index.clone()),
+        in_flight: Vec::new(),
+        sent: Vec::new(),
+        fail_every: 3,
+    };
+    let mut sched = Scheduler::new(
+        &index,
+        SchedulerOptions {
+            prefetch: false,
+            clock: fake_clock,
+            ..Default::default()
+        },
+    );
+    let mut store = CountingStore::default();
+    let cam = camera(&index);
+    let mut done = false;
+    for f in 0..3000u32 {
+        CLOCK.with(|c| c.set(f as f64 * 50.0));
+        let st = sched.frame(&cam, f as f64 / 20.0, &mut flaky, &mut store);
+        if f > 2 && st.pending_loads == 0 && st.cache_misses == 0 {
+            done = true;
+            break;
+        }
+        // After a while, the network heals.
+        if f == 200 {
+            flaky.fail_every = 0;
+        }
+    }
+    assert!(done, "the flaky source did not converge");
+    let mut d = sched.draw().to_vec();
+    d.sort_unstable();
+    assert_eq!(d, direct);
+    assert!(flaky.fetcher.stats().failed_requests > 0);
+}
+
+thread_local! {
+    static CLOCK: std::cell::Cell<f64> = const { std::cell::Cell::new(0.0) };
+}
+
+fn fake_clock() -> f64 {
+    CLOCK.with(|c| c.get())
+}

@@ -1,0 +1,233 @@
+// Tessera in a web page: a small ES module over the WebAssembly viewer (crates/web,
+// built with scripts/build-web into web/dist/ beside this file).
+//
+//   import { Tessera } from './tessera.js';
+//   const v = await Tessera.view(canvas, { url, tolerancePx: 1, memoryBytes: 256 << 20 });
+//   v.addEventListener('progress', (e) => console.log(e.detail.triangles));
+//   v.addEventListener('idle', () => ...);      // the view converged: nothing pending
+//   v.addEventListener('error', (e) => console.error(e.detail.message));
+//   v.setCamera({ position, target, up, fov_y_deg, width, height });  // docs/camera.md
+//   v.camera();     // the current camera (sized as the canvas)
+//   v.dispose();    // stops the frame loop, frees the GPU and wasm memory
+//
+// Tessera.view rejects with an Error whose message is meant for the page (no WebGL2, a
+// 404 model, a server without Range support, a model of a newer format version).
+// Mouse: left drag orbits, right / middle / shift-left drag pans, the wheel zooms.
+
+import init, { Viewer } from './tessera_web.js';
+
+let wasmReady = null;
+
+function loadWasm() {
+  if (!wasmReady) {
+    wasmReady = init({ module_or_path: new URL('./tessera_web_bg.wasm', import.meta.url) });
+  }
+  return wasmReady;
+}
+
+/** Whether this browser gives a WebGL2 context (tried on a canvas of its own). */
+export function hasWebGL2() {
+  try {
+    const c = document.createElement('canvas');
+    return !!c.getContext('webgl2');
+  } catch (_) {
+    return false;
+  }
+}
+
+function cameraJson(camera) {
+  return typeof camera === 'string' ? camera : JSON.stringify(camera);
+}
+
+/** A model streaming into a canvas. Made by `Tessera.view`. */
+export class View extends EventTarget {
+  #viewer;
+  #canvas;
+  #raf = 0;
+  #disposed = false;
+  #stats = null;
+  #idle = false;
+  #convergedFrames = 0;
+  #frameTimes = [];
+  #listeners = [];
+  #resizeObserver = null;
+
+  constructor(viewer, canvas, autoResize) {
+    super();
+    this.#viewer = viewer;
+    this.#canvas = canvas;
+    this.#bindInput();
+    if (autoResize && typeof ResizeObserver !== 'undefined') {
+      this.#resizeObserver = new ResizeObserver(() => this.#fit());
+      this.#resizeObserver.observe(canvas);
+    }
+    this.#raf = requestAnimationFrame((t) => this.#frame(t));
+  }
+
+  /** The last frame's statistics (see crates/web/src/viewer.rs `frame`), plus fps. */
+  get stats() {
+    return this.#stats;
+  }
+
+  /** Whether the view has converged (nothing pending, nothing moving). */
+  get idle() {
+    return this.#idle;
+  }
+
+  /** Moves to `camera` (an object or JSON string of docs/camera.md). */
+  setCamera(camera) {
+    this.#viewer.set_camera(cameraJson(camera));
+  }
+
+  /** The current camera (docs/camera.md), sized as the canvas. */
+  camera() {
+    return JSON.parse(this.#viewer.camera());
+  }
+
+  /** Back to the home view. */
+  reset() {
+    this.#viewer.reset();
+  }
+
+  /** Changes the screen-space error tolerance, pixels. */
+  setTolerance(px) {
+    this.#viewer.set_tolerance_px(px);
+  }
+
+  /** Stops everything and frees the viewer's memory (GPU buffers, wasm heap). */
+  dispose() {
+    if (this.#disposed) return;
+    this.#disposed = true;
+    cancelAnimationFrame(this.#raf);
+    for (const [target, type, fn, opts] of this.#listeners) target.removeEventListener(type, fn, opts);
+    this.#listeners = [];
+    if (this.#resizeObserver) this.#resizeObserver.disconnect();
+    this.#viewer.free();
+    this.#viewer = null;
+  }
+
+  #fit() {
+    if (this.#disposed) return;
+    const dpr = window.devicePixelRatio || 1;
+    const w = Math.max(1, Math.round(this.#canvas.clientWidth * dpr));
+    const h = Math.max(1, Math.round(this.#canvas.clientHeight * dpr));
+    if (w !== this.#canvas.width || h !== this.#canvas.height) {
+      this.#canvas.width = w;
+      this.#canvas.height = h;
+    }
+    this.#viewer.resize(w, h);
+  }
+
+  #on(target, type, fn, opts) {
+    target.addEventListener(type, fn, opts);
+    this.#listeners.push([target, type, fn, opts]);
+  }
+
+  #pixels(e) {
+    const r = this.#canvas.getBoundingClientRect();
+    const sx = r.width > 0 ? this.#canvas.width / r.width : 1;
+    const sy = r.height > 0 ? this.#canvas.height / r.height : 1;
+    return [(e.clientX - r.left) * sx, (e.clientY - r.top) * sy];
+  }
+
+  #bindInput() {
+    const c = this.#canvas;
+    this.#on(c, 'pointerdown', (e) => {
+      if (this.#disposed) return;
+      c.setPointerCapture(e.pointerId);
+      const [x, y] = this.#pixels(e);
+      this.#viewer.pointer_down(e.button, x, y, e.shiftKey);
+      this.dispatchEvent(new CustomEvent('interact'));
+      e.preventDefault();
+    });
+    this.#on(c, 'pointermove', (e) => {
+      if (this.#disposed) return;
+      const [x, y] = this.#pixels(e);
+      this.#viewer.pointer_move(x, y);
+    });
+    const up = (e) => {
+      if (this.#disposed) return;
+      if (c.hasPointerCapture(e.pointerId)) c.releasePointerCapture(e.pointerId);
+      this.#viewer.pointer_up();
+    };
+    this.#on(c, 'pointerup', up);
+    this.#on(c, 'pointercancel', up);
+    this.#on(c, 'contextmenu', (e) => e.preventDefault());
+    this.#on(
+      c,
+      'wheel',
+      (e) => {
+        if (this.#disposed) return;
+        e.preventDefault();
+        // One notch (100 px, or 3 lines) is one zoom step; positive zooms in.
+        const px = e.deltaMode === 1 ? e.deltaY * 33 : e.deltaMode === 2 ? e.deltaY * 400 : e.deltaY;
+        this.#viewer.wheel(-px / 100);
+        this.dispatchEvent(new CustomEvent('interact'));
+      },
+      { passive: false },
+    );
+  }
+
+  #frame(t) {
+    if (this.#disposed) return;
+    let stats;
+    try {
+      stats = JSON.parse(this.#viewer.frame(t));
+    } catch (e) {
+      const message = e && e.message ? e.message : String(e);
+      this.#stats = { ...(this.#stats || {}), error: message, idle: false };
+      this.#idle = false;
+      this.dispatchEvent(new CustomEvent('error', { detail: { message } }));
+      return; // the loop stops: a fatal streaming error
+    }
+    if (stats.drew) {
+      this.#frameTimes.push(t);
+    }
+    while (this.#frameTimes.length && this.#frameTimes[0] < t - 1000) this.#frameTimes.shift();
+    stats.fps = this.#frameTimes.length;
+    this.#stats = stats;
+    // Idle once two frames in a row have converged: the last one drawn is on screen.
+    this.#convergedFrames = stats.idle ? this.#convergedFrames + 1 : 0;
+    const idle = this.#convergedFrames >= 2;
+    if (idle !== this.#idle) {
+      this.#idle = idle;
+      if (idle) this.dispatchEvent(new CustomEvent('idle', { detail: stats }));
+    }
+    this.dispatchEvent(new CustomEvent('progress', { detail: stats }));
+    this.#raf = requestAnimationFrame((t2) => this.#frame(t2));
+  }
+}
+
+export const Tessera = {
+  /**
+   * Opens the model at `url` (served with HTTP Range support) in `canvas`.
+   * Options: tolerancePx (default 1), memoryBytes (default 512 MiB: half GPU, a
+   * quarter decoded patches), camera (docs/camera.md; default the home view),
+   * autoResize (default true: the canvas follows its CSS size times devicePixelRatio;
+   * false keeps canvas.width x canvas.height).
+   */
+  async view(canvas, { url, tolerancePx = 1, memoryBytes = 512 * 1048576, camera = null, autoResize = true } = {}) {
+    if (!url) throw new Error('Tessera.view: no model URL given');
+    if (!hasWebGL2()) {
+      throw new Error(
+        'This browser cannot draw with WebGL2: enable WebGL or hardware acceleration, or use a browser that has it.',
+      );
+    }
+    await loadWasm();
+    if (autoResize) {
+      const dpr = window.devicePixelRatio || 1;
+      canvas.width = Math.max(1, Math.round(canvas.clientWidth * dpr));
+      canvas.height = Math.max(1, Math.round(canvas.clientHeight * dpr));
+    }
+    const abs = new URL(url, document.baseURI).href;
+    const options = JSON.stringify({
+      tolerancePx,
+      memoryBytes,
+      camera: camera == null ? null : typeof camera === 'string' ? JSON.parse(camera) : camera,
+    });
+    const viewer = await Viewer.open(canvas, abs, options);
+    return new View(viewer, canvas, autoResize);
+  },
+};
+
+export default Tessera;
