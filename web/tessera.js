@@ -204,9 +204,13 @@ export const Tessera = {
    * Options: tolerancePx (default 1), memoryBytes (default 512 MiB: half GPU, a
    * quarter decoded patches), camera (docs/camera.md; default the home view),
    * autoResize (default true: the canvas follows its CSS size times devicePixelRatio;
-   * false keeps canvas.width x canvas.height).
+   * false keeps canvas.width x canvas.height), prefixBytes (bytes of the first range
+   * request, default 64 KiB: the header and the top of the index of most models).
    */
-  async view(canvas, { url, tolerancePx = 1, memoryBytes = 512 * 1048576, camera = null, autoResize = true } = {}) {
+  async view(
+    canvas,
+    { url, tolerancePx = 1, memoryBytes = 512 * 1048576, camera = null, autoResize = true, prefixBytes = 65536 } = {},
+  ) {
     if (!url) throw new Error('Tessera.view: no model URL given');
     if (!hasWebGL2()) {
       throw new Error(
@@ -223,6 +227,7 @@ export const Tessera = {
     const options = JSON.stringify({
       tolerancePx,
       memoryBytes,
+      prefixBytes,
       camera: camera == null ? null : typeof camera === 'string' ? JSON.parse(camera) : camera,
     });
     const viewer = await Viewer.open(canvas, abs, options);

@@ -56,7 +56,7 @@ fn dist() -> PathBuf {
             d.join(f).display()
         );
     }
-    for f in ["index.html", "tessera.js"] {
+    for f in ["index.html", "embed.html", "tessera.js"] {
         let src = std::fs::read(repo().join("web").join(f)).unwrap();
         assert!(
             std::fs::read(d.join(f)).unwrap() == src,
@@ -105,10 +105,9 @@ fn serve(dir: &Path, web: &Path) -> (Running, SocketAddr) {
     out.read_line(&mut line).unwrap();
     let addr: SocketAddr = line
         .trim()
-        .trim_start_matches("serving 1 model at http://")
-        .trim_end_matches('/')
-        .parse()
-        .unwrap_or_else(|_| panic!("unexpected first line of tessera serve: {line}"));
+        .rsplit_once(" at http://")
+        .and_then(|(_, a)| a.trim_end_matches('/').parse().ok())
+        .unwrap_or_else(|| panic!("unexpected first line of tessera serve: {line}"));
     std::thread::spawn(move || std::io::copy(&mut out, &mut std::io::sink()));
     (child, addr)
 }
@@ -253,6 +252,19 @@ fn the_page_shows_the_model_as_tessera_render_and_errors_clearly() {
     let model = models.join("bunny.tsr");
     let (code, _, stderr) = run_tessera(args!["build", bunny, "-o", model, "--quiet"]);
     assert_eq!(code, 0, "{stderr}");
+    // The same mesh in index pages of 8 nodes: the page reads the top page first and
+    // grows the index (in wasm, over more range requests) as the view asks.
+    let paged = models.join("paged.tsr");
+    let (code, _, stderr) = run_tessera(args![
+        "build",
+        bunny,
+        "-o",
+        paged,
+        "--quiet",
+        "--index-page-nodes",
+        "8"
+    ]);
+    assert_eq!(code, 0, "{stderr}");
     let (_server, addr) = serve(&models, &web);
 
     // A model of a newer format version (header checksum made valid again), on a
@@ -281,11 +293,17 @@ fn the_page_shows_the_model_as_tessera_render_and_errors_clearly() {
 
     let camera_a = format!(r#"{CAMERA_A}, "width": {WIDTH}, "height": {HEIGHT}}}"#);
     let shot = dir.join("browser.png");
+    let paged_shot = dir.join("paged.png");
+    let embed_shot = dir.join("embed.png");
     let home = dir.join("home.png");
     let base = format!("http://{addr}");
     let visits = json!([
         {"name": "camera", "url": format!("{base}/?model=/models/bunny.tsr#camera={}", encode(&camera_a)),
          "expect": "idle", "screenshot": shot, "timeout_ms": 120000, "viewport": [800, 480]},
+        {"name": "paged", "url": format!("{base}/?model=/models/paged.tsr#camera={}", encode(&camera_a)),
+         "expect": "idle", "screenshot": paged_shot, "timeout_ms": 120000, "viewport": [800, 480]},
+        {"name": "embed-paged", "url": format!("{base}/embed.html?model=/models/paged.tsr&prefixBytes=1024#camera={}", encode(&camera_a)),
+         "expect": "idle", "screenshot": embed_shot, "timeout_ms": 120000, "viewport": [800, 480]},
         {"name": "home", "url": format!("{base}/"), "expect": "idle", "screenshot": home,
          "timeout_ms": 120000, "viewport": [640, 480], "drag": [120, 40]},
         {"name": "404", "url": format!("{base}/?model=/models/nope.tsr"), "expect": "error",
@@ -326,7 +344,7 @@ fn the_page_shows_the_model_as_tessera_render_and_errors_clearly() {
             }
         );
     }
-    for name in ["camera", "home"] {
+    for name in ["camera", "paged", "embed-paged", "home"] {
         let r = by(name);
         assert_eq!(r["outcome"], "idle", "{name}: {r:#}");
         assert_eq!(r["stats"]["pending"], 0, "{name}: {r:#}");
@@ -391,6 +409,39 @@ fn the_page_shows_the_model_as_tessera_render_and_errors_clearly() {
     assert!(
         p_wrong < MIN_PSNR_DB,
         "negative control: another camera's frame passed at {p_wrong:.2} dB"
+    );
+    // The paged model: read in several steps, the same picture.
+    let p = &by("paged")["stats"];
+    let index_bytes = p["index_bytes"].as_u64().unwrap();
+    assert!(
+        p["index_nodes"].as_u64().unwrap() > 8,
+        "the paged index did not grow: {p:#}"
+    );
+    let paged_img = Image::load_png(&paged_shot).unwrap();
+    let p_paged = psnr(&paged_img, &same).unwrap_or(f64::INFINITY);
+    eprintln!(
+        "paged index: {} of {} nodes read ({index_bytes} bytes at open), PSNR {p_paged:.2} dB",
+        p["index_nodes"], p["model_nodes"]
+    );
+    assert!(p_paged >= MIN_PSNR_DB, "paged model: {p_paged:.2} dB");
+    // Embedded with a first request of 1 KiB: the header, block table, directory and
+    // pages come with more range requests as the reader asks for them (in wasm), and
+    // the index grows page by page to the view's needs.
+    let e = &by("embed-paged")["stats"];
+    let embed_img = Image::load_png(&embed_shot).unwrap();
+    let p_embed = psnr(&embed_img, &same).unwrap_or(f64::INFINITY);
+    eprintln!(
+        "embedded, 1 KiB first request: {} of {} nodes, {} requests, {} bytes, PSNR {p_embed:.2} dB",
+        e["index_nodes"], e["model_nodes"], e["requests"], e["bytes_received"]
+    );
+    assert!(
+        e["requests"].as_u64().unwrap() > by("camera")["stats"]["requests"].as_u64().unwrap(),
+        "no index requests after the first: {e:#}"
+    );
+    assert!(e["index_nodes"].as_u64().unwrap() > 8, "{e:#}");
+    assert!(
+        p_embed >= MIN_PSNR_DB,
+        "embedded paged model: {p_embed:.2} dB"
     );
     // The same selection code chose the same cut.
     assert_eq!(

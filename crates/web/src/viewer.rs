@@ -212,7 +212,9 @@ impl Viewer {
     /// Opens the model at `url` in `canvas` (its current pixel size). `options` is a
     /// JSON object: `tolerancePx` (default 1), `memoryBytes` (default 512 MiB: half for
     /// the GPU cache, a quarter for decoded patches, as `tessera render --memory`),
-    /// `camera` (a camera of docs/camera.md; default the home view framed by the roots).
+    /// `camera` (a camera of docs/camera.md; default the home view framed by the roots),
+    /// `prefixBytes` (bytes of the first request, default 64 KiB: the header and the
+    /// top of the index of most models; what it lacks is fetched after).
     /// Errors carry a message meant for the page.
     pub async fn open(
         canvas: web_sys::HtmlCanvasElement,
@@ -224,6 +226,9 @@ impl Viewer {
             serde_json::from_str(&options).map_err(|e| err(format!("options: {e}")))?;
         let tolerance_px = opts["tolerancePx"].as_f64().unwrap_or(1.0) as f32;
         let memory = opts["memoryBytes"].as_f64().unwrap_or(512.0 * 1048576.0) as u64;
+        let prefix_bytes = opts["prefixBytes"]
+            .as_f64()
+            .map_or(PREFIX_BYTES, |b| (b as u64).max(1));
         let camera = match &opts["camera"] {
             Value::Null => None,
             v => Some(Camera::from_json_value(v).map_err(|e| err(format!("camera: {e}")))?),
@@ -276,7 +281,7 @@ impl Viewer {
         // The model: its first 64 KiB, the top of its index, its roots.
         let http = Rc::new(Http::new(&url));
         let prefix = http
-            .open(PREFIX_BYTES)
+            .open(prefix_bytes)
             .await
             .map_err(|e| err(e.message()))?;
         let sparse = Rc::new(RefCell::new(SparseBytes::new(http.len())));
@@ -584,8 +589,18 @@ impl Viewer {
         let base = self.index.clone();
         let closed = self.source.closed.clone();
         spawn_local(async move {
-            let pages = (2 * base.loaded_pages()).max(1);
-            let r = read_with(&http, &sparse, |s| base.grown(s, pages)).await;
+            // Doubling the pages read until another level shows (a page may end inside
+            // a level, which stays hidden until it is whole), as `tessera-http` does.
+            let shown = base.nodes().len();
+            let mut cur = (*base).clone();
+            let r = loop {
+                let pages = (2 * cur.loaded_pages()).max(1);
+                match read_with(&http, &sparse, |s| cur.grown(s, pages)).await {
+                    Ok(next) if next.nodes().len() > shown || next.is_complete() => break Ok(next),
+                    Ok(next) => cur = next,
+                    Err(e) => break Err(e),
+                }
+            };
             if !closed.get() {
                 *grown.borrow_mut() = Some(r);
             }
