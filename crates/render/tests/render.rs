@@ -551,8 +551,9 @@ fn rss_bytes() -> u64 {
 /// Many frames of a fixed camera keep memory flat. A shader that branched on the colour
 /// mode around per-vertex work made lavapipe keep ~260 KB a frame (RSS 116 -> 392 MB
 /// over 1,200 frames): a viewer left open would run out of memory. 1,000 tiny frames
-/// here: with that shader RSS grew 126 MiB, now it stays within the allocator's noise
-/// (a few MiB).
+/// here: with that shader RSS grew 126 MiB; now a few MiB (up to 28 MiB seen while the
+/// machine ran other tests beside it, whose threads share the process's RSS), so the
+/// bound is 64 MiB.
 #[test]
 fn memory_stays_flat_over_many_frames() {
     let b = build(None, 20_000, &small_options());
@@ -576,7 +577,7 @@ fn memory_stays_flat_over_many_frames() {
         }
         let grown = rss_bytes().saturating_sub(before);
         assert!(
-            grown < 24 << 20,
+            grown < 64 << 20,
             "{mode:?}: RSS grew {} MiB over 1,000 frames of one camera",
             grown >> 20
         );
