@@ -107,10 +107,22 @@ impl BuildError {
     }
 }
 
-/// Refuses, before any work, an output that is the input itself (the same file, also
-/// through links: the rename at the end would replace the input with the model) or a
-/// directory, or whose directory does not exist.
+/// Refuses, before any work, an input that is not a regular file, and an output that is
+/// the input itself (the same file, also through links: the rename at the end would
+/// replace the input with the model) or a directory, or whose directory does not exist.
 fn check_output(input: &Path, output: &Path) -> Result<(), BuildError> {
+    // The importers read their input more than once (PLY/OBJ/STL detection, then the
+    // data): a FIFO or a device would hang on the second open or lose what the first read
+    // took. Refused before opening it, so nothing blocks.
+    if let Ok(m) = std::fs::metadata(input) {
+        if !m.is_file() && !m.is_dir() {
+            return Err(BuildError::Options(format!(
+                "the input {} is not a regular file (a pipe, socket or device): the importers \
+                 read a file more than once; write it to a file first (e.g. `cat > mesh.ply`)",
+                input.display()
+            )));
+        }
+    }
     let same = |a: &std::fs::Metadata, b: &std::fs::Metadata| {
         #[cfg(unix)]
         {

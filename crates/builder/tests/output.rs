@@ -101,3 +101,22 @@ fn leftovers_of_dead_builds_are_removed_by_the_next_build() {
         "this build left its own directory: {names:?}"
     );
 }
+
+/// Issue 14, failure 4: a FIFO as input hung (the importers open the file twice) and
+/// ignored the first SIGTERM. It is refused before it is opened, so nothing blocks.
+#[cfg(unix)]
+#[test]
+fn a_fifo_as_input_is_refused_without_blocking() {
+    let dir = tempfile::tempdir().unwrap();
+    let fifo = dir.path().join("mesh.obj");
+    let status = std::process::Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .expect("mkfifo");
+    assert!(status.success());
+    let out = dir.path().join("out.tsr");
+    // No writer ever opens the FIFO: an importer that opened it would block forever.
+    let e = build(&fifo, &out, &BuildOptions::default(), &NoProgress).unwrap_err();
+    assert!(e.to_string().contains("not a regular file"), "{e}");
+    assert!(!out.exists());
+}
