@@ -43,6 +43,9 @@ pub enum MeshError {
     /// A vertex position is NaN or infinite.
     #[error("{}: vertex {vertex} has a non-finite coordinate (NaN or infinity)", path.display())]
     NonFinite { path: PathBuf, vertex: u64 },
+    /// A texture coordinate is NaN or infinite (it would be kept and written back out).
+    #[error("{}: texture coordinate {index} is not finite (NaN or infinity)", path.display())]
+    NonFiniteUv { path: PathBuf, index: u64 },
     /// The file holds no triangle at all (after skipping degenerate faces).
     #[error("{}: the mesh has no triangles", path.display())]
     Empty { path: PathBuf },

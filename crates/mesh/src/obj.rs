@@ -312,6 +312,12 @@ impl<'p> ObjReader<'p> {
 
     fn tex_coord<'a>(&mut self, w: impl Iterator<Item = &'a [u8]>) -> Result<(), MeshError> {
         let (vals, _) = self.floats::<3>("vt", 1, w)?;
+        if !(vals[0].is_finite() && vals[1].is_finite()) {
+            return Err(MeshError::NonFiniteUv {
+                path: self.path.to_path_buf(),
+                index: self.vt_count,
+            });
+        }
         self.vt_count += 1;
         if let Some(c) = &mut self.combined {
             c.uvs.push([vals[0], vals[1]]);

@@ -667,6 +667,12 @@ fn read_vertices<D: Decoder, R: Read>(
                 vertex: i,
             });
         }
+        if !v.uv.iter().all(|c| c.is_finite()) {
+            return Err(MeshError::NonFiniteUv {
+                path: cx.path.to_path_buf(),
+                index: i,
+            });
+        }
         visitor.vertex(&v)?;
     }
     Ok(())

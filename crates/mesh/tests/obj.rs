@@ -174,6 +174,13 @@ fn nan_and_empty() {
     assert!(matches!(e, MeshError::NonFinite { vertex: 1, .. }), "{e}");
     let e = read_err("inf.obj", b"v 0 0 0\nv 1 0 0\nv 0 inf 0\nf 1 2 3\n");
     assert!(matches!(e, MeshError::NonFinite { vertex: 2, .. }), "{e}");
+    // Issue 14, failure 7: NaN texture coordinates were kept and written back out.
+    let e = read_err(
+        "nan-vt.obj",
+        b"v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt nan 0.5\nf 1/1 2/2 3/1\n",
+    );
+    assert!(matches!(e, MeshError::NonFiniteUv { index: 1, .. }), "{e}");
+    assert!(e.to_string().contains("texture coordinate 1"), "{e}");
     let e = read_err("empty.obj", b"# nothing\nv 0 0 0\n");
     assert!(matches!(e, MeshError::Empty { .. }), "{e}");
     let e = read_err("zero-bytes.obj", b"");

@@ -421,6 +421,19 @@ fn index_out_of_range() {
     );
 }
 
+/// Issue 14, failure 7: NaN texture coordinates were accepted and written back out.
+#[test]
+fn non_finite_texture_coordinates_are_errors() {
+    let text = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n\
+                property float z\nproperty float u\nproperty float v\nelement face 1\n\
+                property list uchar int vertex_indices\nend_header\n\
+                0 0 0 0 0\n1 0 0 1 0\n0 1 0 nan 1\n3 0 1 2\n";
+    let e = read_err("nan-uv.ply", text.as_bytes());
+    assert!(matches!(e, MeshError::NonFiniteUv { index: 2, .. }), "{e}");
+    let ok = text.replace("nan", "0.5");
+    read_ok("uv.ply", ok.as_bytes());
+}
+
 #[test]
 fn non_finite_coordinates_are_errors() {
     let text = ASCII_QUAD.replace("1 1 0\n", "1 nan 0\n");
