@@ -119,7 +119,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     std::fs::create_dir_all(&frames_dir)
         .with_context(|| format!("cannot create {}", frames_dir.display()))?;
     let scene = tessera_viewer::scene_points(model.as_ref(), 20_000);
-    let up = tessera_nav::guess_up(scene.min.to_array(), scene.max.to_array());
+    let up = scene.guess_up();
     let orbit = tessera_viewer::orbit_path(&scene, up, a.frames.max(1), 1280, 720)?;
     let mut viewer = Viewer::new(
         model,

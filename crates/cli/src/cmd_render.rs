@@ -84,9 +84,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         (Some(p), _) => Shots::Path(CameraPath::from_file(p, a.width, a.height)?),
         (None, Some(n)) => {
             let scene = tessera_viewer::scene_points(model.as_ref(), 20_000);
-            let up = a.up.unwrap_or_else(|| {
-                tessera_nav::guess_up(scene.min.to_array(), scene.max.to_array())
-            });
+            let up = a.up.unwrap_or_else(|| scene.guess_up());
             Shots::Orbit(
                 tessera_viewer::orbit_path(&scene, up, n, a.width, a.height)
                     .context("cannot frame the model for an orbit")?,

@@ -282,8 +282,14 @@ fn view_without_a_display_or_a_model_says_so() {
         .output()
         .unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success() && !stderr.contains("panicked"), "{stderr}");
-    assert!(stderr.contains("mesa-vulkan-drivers") && stderr.contains("tessera render"), "{stderr}");
+    assert!(
+        !out.status.success() && !stderr.contains("panicked"),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("mesa-vulkan-drivers") && stderr.contains("tessera render"),
+        "{stderr}"
+    );
 
     let out = tessera()
         .env_remove("DISPLAY")

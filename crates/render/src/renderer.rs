@@ -93,31 +93,15 @@ pub struct FrameParams {
 }
 
 /// Near and far planes around `spheres` (centre, radius; model or any frame shared with
-/// `eye`): far just beyond the farthest sphere, near just before the nearest one in
-/// front of the eye, but never below `far * 1e-6`. Depth is stored reversed (1 at near,
-/// 0 at far) in a 32-bit float buffer, whose precision is then nearly uniform in
+/// `eye`), measured along the view direction `forward` (unit), as the depth buffer
+/// measures: far just beyond the deepest sphere, near just before the nearest one, but
+/// never below `far * 1e-6`. (Distances alone would clip the near side of whatever is off
+/// axis: a sphere at distance `d` off the axis reaches the view depth
+/// `(c - eye) . forward - r`, less than `d - r`.) Depth is stored reversed (1 at near, 0
+/// at far) in a 32-bit float buffer, whose precision is then nearly uniform in
 /// `log(depth)`: a ratio of 1e6 between far and near still separates surfaces 1e-5 of
 /// their distance apart, so a millimetre detail seen from a few millimetres on a 10 m
-/// statue neither clips nor z-fights. No spheres: `(far * 1e-6, 1)`.
-pub fn clip_planes(eye: DVec3, spheres: impl IntoIterator<Item = (DVec3, f64)>) -> (f64, f64) {
-    let (mut near, mut far) = (f64::INFINITY, 0.0f64);
-    for (c, r) in spheres {
-        let d = (c - eye).length();
-        far = far.max(d + r);
-        near = near.min(d - r);
-    }
-    if far <= 0.0 || !far.is_finite() {
-        return (1e-6, 1.0);
-    }
-    let far = far * 1.01;
-    let near = (near * 0.99).max(far * 1e-6);
-    (near, far)
-}
-
-/// [`clip_planes`] measured along the view direction `forward` (unit), as the depth
-/// buffer measures: a sphere off the view axis at distance `d` reaches the view depth
-/// `(c - eye) . forward - r`, less than `d - r`, so planes from distances alone clip the
-/// near side of whatever is off axis (a model beside another, the edge of a close-up).
+/// statue neither clips nor z-fights. No spheres: `(1e-6, 1)`.
 pub fn clip_planes_along(
     eye: DVec3,
     forward: DVec3,
@@ -143,11 +127,15 @@ impl FrameParams {
     /// coordinates).
     pub fn new(camera: &Camera, cube_origin: [f64; 3], bounds: [f64; 4]) -> FrameParams {
         let c = DVec3::new(bounds[0], bounds[1], bounds[2]);
-        let planes = clip_planes(DVec3::from(camera.position), [(c, bounds[3].max(1e-9))]);
+        let planes = clip_planes_along(
+            DVec3::from(camera.position),
+            camera.basis().forward,
+            [(c, bounds[3].max(1e-9))],
+        );
         Self::with_planes(camera, cube_origin, planes, Shading::default())
     }
 
-    /// Matrices for `camera` with the given near and far planes (see [`clip_planes`]):
+    /// Matrices for `camera` with the given near and far planes (see [`clip_planes_along`]):
     /// a reversed-Z projection (near maps to depth 1, far to 0).
     pub fn with_planes(
         camera: &Camera,
@@ -271,7 +259,7 @@ impl Renderer {
                     polygon_mode,
                     ..Default::default()
                 },
-                // Reversed Z: nearer is larger (see `clip_planes`).
+                // Reversed Z: nearer is larger (see `clip_planes_along`).
                 depth_stencil: Some(wgpu::DepthStencilState {
                     format: DEPTH_FORMAT,
                     depth_write_enabled: Some(polygon_mode == wgpu::PolygonMode::Fill),
@@ -605,39 +593,18 @@ impl Renderer {
         if x >= t.width || y >= t.height {
             return Ok(None);
         }
-        let mut enc = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("tessera depth readback encoder"),
-        });
-        enc.copy_texture_to_buffer(
-            wgpu::TexelCopyTextureInfo {
-                texture: &t.depth,
-                mip_level: 0,
-                origin: wgpu::Origin3d::ZERO,
-                aspect: wgpu::TextureAspect::DepthOnly,
-            },
-            wgpu::TexelCopyBufferInfo {
-                buffer: &t.depth_readback,
-                layout: wgpu::TexelCopyBufferLayout {
-                    offset: 0,
-                    bytes_per_row: Some(t.padded_row),
-                    rows_per_image: Some(t.height),
-                },
-            },
-            wgpu::Extent3d {
-                width: t.width,
-                height: t.height,
-                depth_or_array_layers: 1,
-            },
-        );
-        queue.submit([enc.finish()]);
         // Map only the 8 bytes (the mapping alignment) around the pixel.
         let at = u64::from(y) * u64::from(t.padded_row) + u64::from(x) * 4;
         let start = at & !7;
-        let slice = t.depth_readback.slice(start..start + 8);
-        slice.map_async(wgpu::MapMode::Read, |_| {});
-        device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| RenderError::Device(e.to_string()))?;
+        let slice = copy_and_map(
+            device,
+            queue,
+            t,
+            &t.depth,
+            wgpu::TextureAspect::DepthOnly,
+            &t.depth_readback,
+            start..start + 8,
+        )?;
         let d = {
             let data = slice
                 .get_mapped_range()
@@ -656,36 +623,15 @@ impl Renderer {
         queue: &wgpu::Queue,
     ) -> Result<Image, RenderError> {
         let t = self.targets.as_ref().ok_or(RenderError::NoFrame)?;
-        let mut enc = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("tessera readback encoder"),
-        });
-        enc.copy_texture_to_buffer(
-            wgpu::TexelCopyTextureInfo {
-                texture: &t.color,
-                mip_level: 0,
-                origin: wgpu::Origin3d::ZERO,
-                aspect: wgpu::TextureAspect::All,
-            },
-            wgpu::TexelCopyBufferInfo {
-                buffer: &t.readback,
-                layout: wgpu::TexelCopyBufferLayout {
-                    offset: 0,
-                    bytes_per_row: Some(t.padded_row),
-                    rows_per_image: Some(t.height),
-                },
-            },
-            wgpu::Extent3d {
-                width: t.width,
-                height: t.height,
-                depth_or_array_layers: 1,
-            },
-        );
-        queue.submit([enc.finish()]);
-        let slice = t.readback.slice(..);
-        slice.map_async(wgpu::MapMode::Read, |_| {});
-        device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| RenderError::Device(e.to_string()))?;
+        let slice = copy_and_map(
+            device,
+            queue,
+            t,
+            &t.color,
+            wgpu::TextureAspect::All,
+            &t.readback,
+            0..t.readback.size(),
+        )?;
         let mut rgba = Vec::with_capacity((t.width * t.height * 4) as usize);
         {
             let data = slice
@@ -702,6 +648,51 @@ impl Renderer {
             rgba,
         })
     }
+}
+
+/// Copies the whole of `texture` (a target of `t`: depth formats cannot be copied in
+/// part) into `buffer` with `t`'s padded rows, waits for the GPU, and returns `range` of
+/// the buffer mapped for reading (unmap the buffer when done).
+fn copy_and_map<'b>(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    t: &Targets,
+    texture: &wgpu::Texture,
+    aspect: wgpu::TextureAspect,
+    buffer: &'b wgpu::Buffer,
+    range: std::ops::Range<u64>,
+) -> Result<wgpu::BufferSlice<'b>, RenderError> {
+    let mut enc = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+        label: Some("tessera readback encoder"),
+    });
+    enc.copy_texture_to_buffer(
+        wgpu::TexelCopyTextureInfo {
+            texture,
+            mip_level: 0,
+            origin: wgpu::Origin3d::ZERO,
+            aspect,
+        },
+        wgpu::TexelCopyBufferInfo {
+            buffer,
+            layout: wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(t.padded_row),
+                rows_per_image: Some(t.height),
+            },
+        },
+        wgpu::Extent3d {
+            width: t.width,
+            height: t.height,
+            depth_or_array_layers: 1,
+        },
+    );
+    queue.submit([enc.finish()]);
+    let slice = buffer.slice(range);
+    slice.map_async(wgpu::MapMode::Read, |_| {});
+    device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .map_err(|e| RenderError::Device(e.to_string()))?;
+    Ok(slice)
 }
 
 /// A depth target for `width` x `height`.

@@ -540,14 +540,6 @@ fn multi_pass_frames_match_single_pass() {
     }
 }
 
-/// Resident set size of this process, bytes (Linux).
-fn rss_bytes() -> u64 {
-    std::fs::read_to_string("/proc/self/statm")
-        .ok()
-        .and_then(|s| s.split_whitespace().nth(1)?.parse::<u64>().ok())
-        .map_or(0, |pages| pages * 4096)
-}
-
 /// Many frames of a fixed camera keep memory flat. A shader that branched on the colour
 /// mode around per-vertex work made lavapipe keep ~260 KB a frame (RSS 116 -> 392 MB
 /// over 1,200 frames): a viewer left open would run out of memory. 1,000 tiny frames
@@ -571,11 +563,11 @@ fn memory_stays_flat_over_many_frames() {
         for _ in 0..100 {
             v.render(&cam).expect("frame");
         }
-        let before = rss_bytes();
+        let before = tessera_build::current_rss_bytes();
         for _ in 0..1000 {
             v.render(&cam).expect("frame");
         }
-        let grown = rss_bytes().saturating_sub(before);
+        let grown = tessera_build::current_rss_bytes().saturating_sub(before);
         assert!(
             grown < 64 << 20,
             "{mode:?}: RSS grew {} MiB over 1,000 frames of one camera",

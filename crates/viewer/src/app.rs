@@ -23,7 +23,7 @@ use tessera_select::{Camera, CameraPath};
 use crate::blit::Blit;
 use crate::hud::{self, Action, Hud};
 use crate::pickers::{Picked, Picker, Purpose};
-use crate::scene::{scene_points, scene_points_of};
+use crate::scene::{scene_points, ScenePoints};
 use crate::{ViewArgs, ViewError};
 
 /// Two presses closer than this (and a few pixels) are a double-click.
@@ -261,18 +261,18 @@ impl Running {
         let models: Vec<Arc<dyn PatchReader>> =
             args.models.iter().map(|(m, _)| m.clone()).collect();
         let names: Vec<String> = args.models.iter().map(|(_, n)| n.clone()).collect();
-        let refs: Vec<&dyn PatchReader> = models.iter().map(|m| m.as_ref()).collect();
-        let scene = scene_points_of(&refs, 20_000);
+        // Each model's roots, decoded once: a sample thinned so the scene stays near 20k
+        // points (framing), and each box for the up axis.
+        let per_model = (20_000 / models.len()).max(64);
+        let parts: Vec<ScenePoints> = models
+            .iter()
+            .map(|m| scene_points(m.as_ref(), per_model))
+            .collect();
+        let scene = ScenePoints::union(&parts);
         // The up axis most models guess from their own extent (ties: the first model's):
         // models side by side make the union wide, not tall.
         let up = args.up.unwrap_or_else(|| {
-            let guesses: Vec<UpAxis> = refs
-                .iter()
-                .map(|m| {
-                    let s = scene_points(*m, 1);
-                    tessera_nav::guess_up(s.min.to_array(), s.max.to_array())
-                })
-                .collect();
+            let guesses: Vec<UpAxis> = parts.iter().map(ScenePoints::guess_up).collect();
             let count = |a: &UpAxis| guesses.iter().filter(|g| *g == a).count();
             let best = guesses.iter().map(count).max().unwrap_or(0);
             guesses

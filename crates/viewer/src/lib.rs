@@ -26,7 +26,7 @@ use tessera_format::PatchReader;
 use tessera_nav::UpAxis;
 use tessera_select::{Camera, CameraPath};
 
-pub use scene::{orbit_path, scene_points, scene_points_of, OrbitCameras, ScenePoints};
+pub use scene::{orbit_path, scene_points, OrbitCameras, ScenePoints};
 
 /// What `tessera view` was asked to show, and how.
 pub struct ViewArgs {

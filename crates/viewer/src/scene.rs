@@ -6,27 +6,32 @@
 use glam::DVec3;
 use tessera_format::{Grid, PatchReader, NO_NODE};
 
-/// The scene of several models: their root vertices together (models share model
-/// coordinates), each model's sample thinned so the whole stays near `max_points`.
-pub fn scene_points_of(models: &[&dyn PatchReader], max_points: usize) -> ScenePoints {
-    let per = (max_points / models.len().max(1)).max(64);
-    let parts: Vec<ScenePoints> = models.iter().map(|m| scene_points(*m, per)).collect();
-    let mut points = Vec::new();
-    let (mut min, mut max) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
-    for p in parts {
-        points.extend(p.points);
-        min = min.min(p.min);
-        max = max.max(p.max);
-    }
-    ScenePoints { points, min, max }
-}
-
 /// Root vertices in model coordinates and their box.
 #[derive(Clone, Debug)]
 pub struct ScenePoints {
     pub points: Vec<DVec3>,
     pub min: DVec3,
     pub max: DVec3,
+}
+
+impl ScenePoints {
+    /// The scene of several models: their root vertices together (models share model
+    /// coordinates) and the box around all of them.
+    pub fn union(parts: &[ScenePoints]) -> ScenePoints {
+        let mut points = Vec::new();
+        let (mut min, mut max) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+        for p in parts {
+            points.extend_from_slice(&p.points);
+            min = min.min(p.min);
+            max = max.max(p.max);
+        }
+        ScenePoints { points, min, max }
+    }
+
+    /// The up axis guessed from the box: the axis it is tallest along.
+    pub fn guess_up(&self) -> tessera_nav::UpAxis {
+        tessera_nav::guess_up(self.min.to_array(), self.max.to_array())
+    }
 }
 
 /// Decodes the roots of `model` (at most `max_points` vertices kept, evenly strided).
