@@ -108,6 +108,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
             frame_log: None,
             screenshot: None,
             prefetch: true,
+            morph: true,
             width: 1280,
             height: 720,
             loaders: 2,

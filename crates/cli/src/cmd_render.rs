@@ -65,6 +65,23 @@ pub struct Args {
     /// Do not prefetch beyond the current view.
     #[arg(long)]
     no_prefetch: bool,
+    /// Switch levels without geomorphing (by default a refined node's vertices move
+    /// smoothly from its parent's shape to its own; see docs/morph.md).
+    #[arg(long)]
+    no_morph: bool,
+    /// Draw frame i with the cut and morph ratios selected for the camera of frame
+    /// i - N (its own camera otherwise): rendered beside a normal run, the difference is
+    /// what the selection update alone changes, i.e. popping (0: off).
+    #[arg(long, default_value_t = 0, value_name = "N")]
+    selection_lag: u32,
+    /// Benchmark hook: delay every patch read by this many milliseconds (a slow disk or
+    /// network, progressive mode).
+    #[arg(long, hide = true, default_value_t = 0)]
+    read_delay_ms: u64,
+    /// Seconds over which a group that arrives late blends in from its parent's shape
+    /// (progressive mode; 0: it appears at once).
+    #[arg(long, default_value_t = 0.25, value_name = "S")]
+    arrival_blend: f64,
 }
 
 pub fn run(a: Args) -> anyhow::Result<ExitCode> {
@@ -73,6 +90,9 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     }
     if !(a.tolerance.is_finite() && a.tolerance > 0.0) {
         bail!("--tolerance must be a positive number of pixels");
+    }
+    if !(a.arrival_blend.is_finite() && (0.0..=10.0).contains(&a.arrival_blend)) {
+        bail!("--arrival-blend must be between 0 and 10 seconds");
     }
     if a.orbit == Some(0) {
         bail!("--orbit needs at least one frame");
@@ -110,6 +130,13 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         ram_budget_bytes: a.memory / 4,
         loader_threads: a.loaders.max(1),
         prefetch: !a.no_prefetch,
+        morph: tessera_render::MorphOptions {
+            enabled: !a.no_morph,
+            arrival_blend_s: a.arrival_blend,
+            ..Default::default()
+        },
+        read_delay: (a.read_delay_ms > 0)
+            .then(|| std::time::Duration::from_millis(a.read_delay_ms)),
         ..Default::default()
     };
     let t_open = Instant::now();
@@ -163,7 +190,12 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
             bail!("interrupted after {i} of {n} frames (the stats file is not written)");
         }
         let cam = shots.camera(i);
-        let s = viewer.render(&cam)?;
+        let s = if a.selection_lag > 0 {
+            let select = shots.camera(i.saturating_sub(a.selection_lag));
+            viewer.render_with(&select, &cam)?
+        } else {
+            viewer.render(&cam)?
+        };
         if let Some(dir) = &a.out {
             let img = viewer.read_image()?;
             img.save_png(&dir.join(format!("frame_{i:05}.png")))?;
@@ -196,6 +228,8 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         "max_frame_ms": agg.max_frame_ms,
         "mean_selection_ms": agg.mean(agg.selection_ms),
         "mean_triangles": agg.mean(agg.triangles),
+        "mean_morph_ratio": agg.mean(agg.morph_mean),
+        "max_morph_ratio": agg.morph_max,
         "bytes_uploaded": agg.bytes_uploaded,
         "failed_patches": last.failed_patches,
         "peak_rss_bytes": peak_rss,
@@ -308,6 +342,9 @@ struct Aggregate {
     triangles: f64,
     bytes_uploaded: u64,
     max_frame_ms: f64,
+    /// Sum of the frames' mean morph ratios, and the largest ratio of any frame.
+    morph_mean: f64,
+    morph_max: f32,
     /// Frame times in bins 0.1% wide on a log scale from 1 us (see `bin`).
     bins: Vec<u32>,
 }
@@ -326,6 +363,8 @@ impl Aggregate {
         self.triangles += s.triangles as f64;
         self.bytes_uploaded += s.bytes_uploaded;
         self.max_frame_ms = self.max_frame_ms.max(s.frame_ms);
+        self.morph_mean += f64::from(s.morph_mean);
+        self.morph_max = self.morph_max.max(s.morph_max);
         let b = Self::bin(s.frame_ms).min(40_000);
         if self.bins.len() <= b {
             self.bins.resize(b + 1, 0);

@@ -40,6 +40,9 @@ pub struct Args {
     /// Do not prefetch beyond the current view.
     #[arg(long)]
     no_prefetch: bool,
+    /// Switch levels without geomorphing (G toggles it in the window).
+    #[arg(long)]
+    no_morph: bool,
     /// Window width, pixels.
     #[arg(long, default_value_t = 1280)]
     width: u32,
@@ -86,6 +89,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         frame_log: a.frame_log,
         screenshot: a.screenshot,
         prefetch: !a.no_prefetch,
+        morph: !a.no_morph,
         width: a.width,
         height: a.height,
         loaders: a.loaders,

@@ -25,59 +25,125 @@ use rustc_hash::FxHashMap;
 use tessera_format::PatchData;
 use tessera_stream::{ResidentStore, StoreError};
 
-/// One vertex as the shader reads it, 24 bytes.
+/// One vertex as the shader reads it, 40 bytes: the vertex and its morph target (the
+/// position and attributes it takes in its parent's shape, see `tessera_select::morph`).
+///
+/// Size: the target adds 16 bytes to the 24 a vertex took without morphing: its
+/// position (f32 x 3, the same grid point the file stores, exact in the local frame),
+/// and octahedral normals (own and target as snorm16 x 2 each: 4 bytes apiece instead
+/// of 8 for one snorm16 xyz + tag, so the second normal costs nothing). The node tag
+/// moved to the per-draw instance data ([`Slot::tag`]).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct GpuVertex {
     /// Local frame (model coordinates minus the cube origin).
     pub position: [f32; 3],
-    /// Unit normal as snorm16 xyz; w: the node's [`vertex_tag`] (its level and a hash
-    /// of its id, for the colour-by-node and by-level modes).
-    pub normal: [i16; 4],
+    /// Morph target, local frame; equal to `position` for survivors, locked border
+    /// vertices and roots.
+    pub target: [f32; 3],
+    /// Unit normal, octahedral, snorm16 x 2 ([`oct_snorm16`]).
+    pub normal: [i16; 2],
+    /// The target's normal, same coding (the surviving vertex's normal when it is in
+    /// the patch, else the vertex's own).
+    pub target_normal: [i16; 2],
     /// RGBA8, white when the model has no colours.
     pub color: [u8; 4],
+    /// The target's colour (same rule as the normal).
+    pub target_color: [u8; 4],
 }
 
 /// Bytes per vertex.
 pub const VERTEX_BYTES: u64 = std::mem::size_of::<GpuVertex>() as u64;
+const _: () = assert!(VERTEX_BYTES == 40);
 /// Bytes per index (u32 indices: patches may exceed 65536 vertices on odd inputs).
 pub const INDEX_BYTES: u64 = 4;
 
-/// The tag every vertex of a node carries (`GpuVertex::normal[3]`): its level in the
-/// top 6 bits (levels above 63 share 63), a hash of (model, node) in the low 10.
-///
-/// Why in the vertex and not in the draw (a first-instance index): WebGL2 has no
-/// first-instance draws, and the normal's fourth component was free, so the tag costs
-/// no byte and no per-draw state on any backend.
-pub fn vertex_tag(model: u32, node: u32, level: u8) -> i16 {
+/// The tag of a node's draw ([`Slot::tag`]): its level in the top 6 bits (levels above
+/// 63 share 63), a hash of (model, node) in the low 10, for the colour-by-node and
+/// by-level modes.
+pub fn vertex_tag(model: u32, node: u32, level: u8) -> u32 {
     let mut h = (node ^ model.wrapping_mul(0x9E37_79B9)).wrapping_mul(0x85EB_CA6B);
     h ^= h >> 13;
-    let tag = (u16::from(level.min(63)) << 10) | (h & 0x3FF) as u16;
-    tag as i16
+    (u32::from(level.min(63)) << 10) | (h & 0x3FF)
+}
+
+/// A unit vector as octahedral snorm16 x 2 (the shader's `oct_decode` inverts it; the
+/// zero vector, of a patch without normals (the builder always writes them), gives
+/// (0, 0): +z).
+pub fn oct_snorm16(n: [f32; 3]) -> [i16; 2] {
+    let l1 = n[0].abs() + n[1].abs() + n[2].abs();
+    if l1.is_nan() || l1 <= 0.0 {
+        return [0, 0];
+    }
+    let (mut x, mut y) = (n[0] / l1, n[1] / l1);
+    if n[2] < 0.0 {
+        let sx = if x >= 0.0 { 1.0 } else { -1.0 };
+        let sy = if y >= 0.0 { 1.0 } else { -1.0 };
+        (x, y) = ((1.0 - y.abs()) * sx, (1.0 - x.abs()) * sy);
+    }
+    let q = |v: f32| (v.clamp(-1.0, 1.0) * 32767.0).round() as i16;
+    [q(x), q(y)]
 }
 
 /// Converts a decoded patch to GPU vertices, positions in the local frame
-/// (`grid * quant_step`), every vertex tagged with `tag` ([`vertex_tag`]).
-pub fn gpu_vertices(p: &PatchData, quant_step: f64, tag: i16, out: &mut Vec<GpuVertex>) {
+/// (`grid * quant_step`), morph targets with their attributes: a target is a surviving
+/// vertex of the parent's simplification, whose normal and colour are taken from the
+/// vertex of this patch at that position (one hash lookup per moving vertex, at upload
+/// only); a survivor that lives in a sibling patch lends none, and the vertex keeps its
+/// own attributes while it moves.
+pub fn gpu_vertices(p: &PatchData, quant_step: f64, out: &mut Vec<GpuVertex>) {
     out.clear();
     out.reserve(p.positions.len());
-    let snorm = |x: f32| (x.clamp(-1.0, 1.0) * 32767.0).round() as i16;
-    for (i, q) in p.positions.iter().enumerate() {
-        let position = [
+    let local = |q: &[u32; 3]| {
+        [
             (q[0] as f64 * quant_step) as f32,
             (q[1] as f64 * quant_step) as f32,
             (q[2] as f64 * quant_step) as f32,
-        ];
-        let normal = match p.normals.get(i) {
-            Some(n) => [snorm(n[0]), snorm(n[1]), snorm(n[2]), tag],
-            None => [0, 0, 0, tag],
-        };
-        let color = p.colors.get(i).copied().unwrap_or([255; 4]);
-        out.push(GpuVertex {
+        ]
+    };
+    let has_normals = p.normals.len() == p.positions.len();
+    let normal = |i: usize| {
+        if has_normals {
+            oct_snorm16(p.normals[i])
+        } else {
+            [0, 0]
+        }
+    };
+    let color = |i: usize| p.colors.get(i).copied().unwrap_or([255; 4]);
+    let morphs = p.morph_targets.len() == p.positions.len()
+        && p.morph_targets
+            .iter()
+            .zip(&p.positions)
+            .any(|(t, q)| t != q);
+    let at: FxHashMap<[u32; 3], u32> = if morphs {
+        p.positions
+            .iter()
+            .enumerate()
+            .map(|(i, q)| (*q, i as u32))
+            .collect()
+    } else {
+        FxHashMap::default()
+    };
+    for (i, q) in p.positions.iter().enumerate() {
+        let position = local(q);
+        let (n, c) = (normal(i), color(i));
+        let mut v = GpuVertex {
             position,
-            normal,
-            color,
-        });
+            target: position,
+            normal: n,
+            target_normal: n,
+            color: c,
+            target_color: c,
+        };
+        if morphs && p.morph_targets[i] != *q {
+            let t = &p.morph_targets[i];
+            v.target = local(t);
+            if let Some(&j) = at.get(t) {
+                v.target_normal = normal(j as usize);
+                v.target_color = color(j as usize);
+            }
+        }
+        out.push(v);
     }
 }
 
@@ -88,6 +154,8 @@ pub struct Slot {
     pub vertices: Range<u32>,
     /// Index range (in indices) in the index buffer.
     pub indices: Range<u32>,
+    /// The node's tag ([`vertex_tag`]), drawn with it as instance data.
+    pub tag: u32,
 }
 
 impl Slot {
@@ -446,18 +514,17 @@ impl GpuCache {
             .and_then(|l| l.get(node as usize))
             .copied()
             .unwrap_or(0);
-        gpu_vertices(
-            patch,
-            quant_step,
-            vertex_tag(model, node, level),
-            &mut verts,
-        );
+        gpu_vertices(patch, quant_step, &mut verts);
         self.vertices
             .write(queue, vertices.start, bytemuck::cast_slice(&verts));
         self.scratch = verts;
         self.indices
             .write(queue, indices.start, bytemuck::cast_slice(&patch.indices));
-        let slot = Slot { vertices, indices };
+        let slot = Slot {
+            vertices,
+            indices,
+            tag: vertex_tag(model, node, level),
+        };
         let bytes = slot.bytes();
         self.stats.resident_bytes += bytes;
         self.stats.uploaded_bytes += bytes;

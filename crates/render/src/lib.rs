@@ -25,10 +25,11 @@ mod viewer;
 pub use cache::{GpuCache, GpuCacheStats, GpuStore, GpuVertex, Slot};
 pub use gpu::Gpu;
 pub use renderer::{
-    clip_planes_along, ColorMode, FrameParams, Light, Renderer, Shading, DEPTH_FORMAT, PATCH_SHADER,
+    clip_planes_along, ColorMode, DrawInstance, FrameParams, Light, Renderer, Shading,
+    DEPTH_FORMAT, PATCH_SHADER,
 };
 pub use tessera_image::{diff_stats, enclosed_background_pixels, psnr, Image, ImageError};
-pub use tessera_stream::{FrameStats, Mode};
+pub use tessera_stream::{FrameStats, Mode, MorphOptions};
 #[cfg(feature = "native")]
 pub use viewer::{Viewer, ViewerOptions};
 

@@ -22,12 +22,30 @@ struct Frame {
 
 @group(0) @binding(0) var<uniform> frame: Frame;
 
+// Geomorphing (GoLD): every vertex carries its morph target (the position, normal and
+// colour it takes in its parent's shape) and each draw its node's ratio r, as instance
+// data: r = 0 draws the node's own shape, r = 1 its parent's. `a + (b - a) * r` keeps a
+// vertex whose target is itself (locked borders, survivors) bit-exact at every ratio,
+// so neighbours morphing at different ratios meet exactly there.
 struct VertexIn {
     @location(0) position: vec3<f32>,
-    // xyz: the unit normal as snorm16; w: the node's tag (`vertex_tag`: level in the top
-    // 6 bits, a hash of the node in the low 10).
-    @location(1) normal: vec4<i32>,
-    @location(2) color: vec4<f32>,
+    @location(1) target_pos: vec3<f32>,
+    // Octahedral unit normals (snorm16 x 2), own and target.
+    @location(2) normal: vec2<f32>,
+    @location(3) target_normal: vec2<f32>,
+    @location(4) color: vec4<f32>,
+    @location(5) target_color: vec4<f32>,
+    // Per draw: the morph ratio, and the node's tag (`vertex_tag`: level in the top 6
+    // bits, a hash of the node in the low 10).
+    @location(6) ratio: f32,
+    @location(7) tag: u32,
+}
+
+fn oct_decode(e: vec2<f32>) -> vec3<f32> {
+    let z = 1.0 - abs(e.x) - abs(e.y);
+    let t = max(-z, 0.0);
+    let s = select(vec2<f32>(1.0), vec2<f32>(-1.0), e < vec2<f32>(0.0));
+    return normalize(vec3<f32>(e - s * t, z));
 }
 
 struct VertexOut {
@@ -39,13 +57,17 @@ struct VertexOut {
 @vertex
 fn vs_main(v: VertexIn) -> VertexOut {
     var out: VertexOut;
-    out.clip = frame.view_proj * vec4<f32>(v.position, 1.0);
-    out.normal = vec3<f32>(v.normal.xyz) / 32767.0;
-    let tag = u32(v.normal.w) & 0xFFFFu;
+    let r = v.ratio;
+    let p = v.position + (v.target_pos - v.position) * r;
+    out.clip = frame.view_proj * vec4<f32>(p, 1.0);
+    let n0 = oct_decode(v.normal);
+    out.normal = n0 + (oct_decode(v.target_normal) - n0) * r;
+    let tag = v.tag & 0xFFFFu;
+    let c = v.color + (v.target_color - v.color) * r;
     // No branches: with a branch on the uniform around per-vertex work, lavapipe
     // (Mesa 22.3) keeps ~260 KB a frame (RSS grew 116 -> 392 MB over 1,200 frames of
     // a fixed camera); computing all three colours and selecting leaks nothing.
-    let natural = select(frame.clay.rgb, v.color.rgb, frame.sky_up_has_color.w > 0.5);
+    let natural = select(frame.clay.rgb, c.rgb, frame.sky_up_has_color.w > 0.5);
     // By level: hue from blue (coarse) to red (fine) over 12 levels, then again (a view
     // shows a few adjacent levels; they must look different).
     let by_level = hue(0.66 - f32((tag >> 10u) % 12u) / 11.0 * 0.66);

@@ -11,6 +11,7 @@
 
 use glam::{DVec3, Mat4};
 use tessera_select::Camera;
+use wgpu::util::DeviceExt;
 
 use crate::cache::{GpuCache, GpuVertex, Slot, VERTEX_BYTES};
 use crate::RenderError;
@@ -32,6 +33,16 @@ struct FrameUniform {
     /// x: colour mode (0 natural, 1 by node, 2 by level); y: 1 = unlit; z: wireframe
     /// pass (lines drawn dark); w unused.
     mode: [f32; 4],
+}
+
+/// Per-draw instance data: the drawn node's morph ratio and tag.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct DrawInstance {
+    /// 0: the node's own shape, 1: its parent's.
+    pub ratio: f32,
+    /// [`crate::cache::vertex_tag`] of the node.
+    pub tag: u32,
 }
 
 /// Where the light comes from.
@@ -238,9 +249,18 @@ impl Renderer {
             step_mode: wgpu::VertexStepMode::Vertex,
             attributes: &wgpu::vertex_attr_array![
                 0 => Float32x3,
-                1 => Sint16x4,
-                2 => Unorm8x4
+                1 => Float32x3,
+                2 => Snorm16x2,
+                3 => Snorm16x2,
+                4 => Unorm8x4,
+                5 => Unorm8x4
             ],
+        };
+        // Per draw (one instance): the node's morph ratio and tag.
+        let instance_layout = wgpu::VertexBufferLayout {
+            array_stride: std::mem::size_of::<DrawInstance>() as u64,
+            step_mode: wgpu::VertexStepMode::Instance,
+            attributes: &wgpu::vertex_attr_array![6 => Float32, 7 => Uint32],
         };
         let make = |polygon_mode: wgpu::PolygonMode, fs: &str, bias: wgpu::DepthBiasState| {
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
@@ -250,7 +270,7 @@ impl Renderer {
                     module: &shader,
                     entry_point: Some("vs_main"),
                     compilation_options: Default::default(),
-                    buffers: &[Some(vertex_layout.clone())],
+                    buffers: &[Some(vertex_layout.clone()), Some(instance_layout.clone())],
                 },
                 primitive: wgpu::PrimitiveState {
                     topology: wgpu::PrimitiveTopology::TriangleList,
@@ -479,32 +499,67 @@ impl Renderer {
         );
     }
 
-    /// Encodes one pass drawing `slots` from `cache` into `color`/`depth`; clears both
-    /// first when `clear`, else keeps them (a frame drawn in several passes).
+    /// Encodes one pass drawing `slots` (each with its morph ratio) from `cache` into
+    /// `color`/`depth`; clears both first when `clear`, else keeps them (a frame drawn
+    /// in several passes).
+    #[allow(clippy::too_many_arguments)]
     pub fn encode_pass<'a>(
         &self,
+        device: &wgpu::Device,
         encoder: &mut wgpu::CommandEncoder,
         color: &wgpu::TextureView,
         depth: &wgpu::TextureView,
         cache: &GpuCache,
-        slots: impl Iterator<Item = &'a Slot> + Clone,
+        slots: impl Iterator<Item = (&'a Slot, f32)>,
         clear: bool,
     ) {
-        self.encode_models_pass(encoder, color, depth, cache, slots.map(|s| (0, s)), clear);
+        let slots = slots.map(|(s, r)| (0, s, r));
+        self.encode_models_pass(device, encoder, color, depth, cache, slots, clear);
     }
 
     /// [`Renderer::encode_pass`] for several models: each slot comes with its model's
     /// uniform entry (written by [`Renderer::set_model_frame`]); slots of one model
     /// should come together (the entry is rebound when it changes).
+    ///
+    /// The ratios and tags go to the GPU as one small instance buffer per pass (8 bytes
+    /// a draw), the draw's instance picking its entry: no per-vertex work, and the
+    /// patches' vertex data never changes after upload.
+    #[allow(clippy::too_many_arguments)]
     pub fn encode_models_pass<'a>(
         &self,
+        device: &wgpu::Device,
         encoder: &mut wgpu::CommandEncoder,
         color: &wgpu::TextureView,
         depth: &wgpu::TextureView,
         cache: &GpuCache,
-        slots: impl Iterator<Item = (u32, &'a Slot)> + Clone,
+        slots: impl Iterator<Item = (u32, &'a Slot, f32)>,
         clear: bool,
     ) {
+        let mut draws: Vec<(u32, &Slot)> = Vec::new();
+        let mut instances: Vec<DrawInstance> = Vec::new();
+        for (model, s, ratio) in slots {
+            if s.indices.is_empty() || model >= self.entries {
+                continue;
+            }
+            draws.push((model, s));
+            instances.push(DrawInstance {
+                ratio: if ratio.is_finite() {
+                    ratio.clamp(0.0, 1.0)
+                } else {
+                    0.0
+                },
+                tag: s.tag,
+            });
+        }
+        if instances.is_empty() {
+            // A valid (never read) binding for a pass that draws nothing.
+            instances.push(DrawInstance::default());
+        }
+        let instance_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("tessera draw instances"),
+            contents: bytemuck::cast_slice(&instances),
+            usage: wgpu::BufferUsages::VERTEX,
+        });
         let [r, g, b, a] = self.background;
         let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("tessera patches pass"),
@@ -539,24 +594,28 @@ impl Renderer {
         });
         pass.set_pipeline(&self.pipeline);
         pass.set_vertex_buffer(0, cache.vertex_buffer().slice(..));
+        pass.set_vertex_buffer(1, instance_buffer.slice(..));
         pass.set_index_buffer(cache.index_buffer().slice(..), wgpu::IndexFormat::Uint32);
+        const INSTANCE_BYTES: u64 = std::mem::size_of::<DrawInstance>() as u64;
         let draw = |pass: &mut wgpu::RenderPass<'_>| {
             let mut bound = None;
-            for (model, s) in slots.clone() {
-                if s.indices.is_empty() || model >= self.entries {
-                    continue;
-                }
+            for (k, &(model, s)) in draws.iter().enumerate() {
                 if bound != Some(model) {
                     let offset = u64::from(model) * self.stride;
                     pass.set_bind_group(0, &self.bind_group, &[offset as u32]);
                     bound = Some(model);
                 }
+                let k = k as u32;
                 if self.base_vertex {
-                    pass.draw_indexed(s.indices.clone(), s.vertices.start as i32, 0..1);
+                    pass.draw_indexed(s.indices.clone(), s.vertices.start as i32, k..k + 1);
                 } else {
+                    // No base vertex (WebGL2), and no first instance either: bind both
+                    // buffers at the draw's entries.
                     let bytes = u64::from(s.vertices.start) * VERTEX_BYTES
                         ..u64::from(s.vertices.end) * VERTEX_BYTES;
                     pass.set_vertex_buffer(0, cache.vertex_buffer().slice(bytes));
+                    let i = u64::from(k) * INSTANCE_BYTES;
+                    pass.set_vertex_buffer(1, instance_buffer.slice(i..i + INSTANCE_BYTES));
                     pass.draw_indexed(s.indices.clone(), 0, 0..1);
                 }
             }

@@ -23,7 +23,9 @@ use glam::DVec3;
 use tessera_format::{ModelIndex, PatchReader, ATTR_COLORS};
 use tessera_page::{Pager, PagerOptions};
 use tessera_select::Camera;
-use tessera_stream::{BudgetSplit, CompleteError, ModelDemand, Scheduler, SchedulerOptions};
+use tessera_stream::{
+    BudgetSplit, CompleteError, ModelDemand, MorphOptions, Scheduler, SchedulerOptions,
+};
 
 pub use tessera_stream::{FrameStats, Mode};
 
@@ -58,6 +60,8 @@ pub struct ViewerOptions {
     pub background: [f64; 4],
     /// Light, colour mode, wireframe.
     pub shading: Shading,
+    /// Geomorphing: on/off, window, arrival blend (see `tessera_stream::MorphOptions`).
+    pub morph: MorphOptions,
 }
 
 impl Default for ViewerOptions {
@@ -75,6 +79,7 @@ impl Default for ViewerOptions {
             prefetch: s.prefetch,
             background: [0.06, 0.07, 0.09, 1.0],
             shading: Shading::default(),
+            morph: s.morph.clone(),
         }
     }
 }
@@ -174,6 +179,7 @@ impl Viewer {
                         ram_budget_bytes: opts.ram_budget_bytes,
                         upload_budget_bytes: opts.upload_budget_bytes,
                         prefetch: opts.prefetch,
+                        morph: opts.morph.clone(),
                         ..SchedulerOptions::default()
                     },
                 );
@@ -400,11 +406,11 @@ impl Viewer {
             self.models.iter().map(|m| (m.index(), m.scheduler.draw())),
         );
         self.set_uniforms(camera);
-        let draws: Vec<(u32, &ModelIndex, &[u32])> = self
+        let draws: Vec<Draws> = self
             .models
             .iter()
             .enumerate()
-            .map(|(i, m)| (i as u32, m.index(), m.scheduler.draw()))
+            .map(|(i, m)| (i as u32, m.scheduler.draw(), m.scheduler.morph_ratios()))
             .collect();
         if let Some((color, depth)) = self.renderer.offscreen_views() {
             submit_pass(
@@ -481,7 +487,6 @@ impl Viewer {
             };
             let (gpu, renderer) = (&self.gpu, &self.renderer);
             let m = &mut self.models[i];
-            let index = m.grown.as_deref().unwrap_or(m.model.index());
             let mut store = GpuStore {
                 cache: &mut self.cache,
                 device: &gpu.device,
@@ -491,18 +496,23 @@ impl Viewer {
             };
             let stats = m
                 .scheduler
-                .complete_frame(select, &mut m.pager, &mut store, |s, nodes, clear| {
-                    let draws = [(i as u32, index, nodes)];
-                    submit_pass(
-                        gpu,
-                        renderer,
-                        (color, depth),
-                        s.cache,
-                        &draws,
-                        clear && first,
-                    );
-                    Ok::<(), RenderError>(())
-                })
+                .complete_frame(
+                    select,
+                    &mut m.pager,
+                    &mut store,
+                    |s, nodes, ratios, clear| {
+                        let draws = [(i as u32, nodes, ratios)];
+                        submit_pass(
+                            gpu,
+                            renderer,
+                            (color, depth),
+                            s.cache,
+                            &draws,
+                            clear && first,
+                        );
+                        Ok::<(), RenderError>(())
+                    },
+                )
                 .map_err(|e| match e {
                     CompleteError::StoreTooSmall => RenderError::CacheTooSmall,
                     CompleteError::NoBlockingReads => {
@@ -623,6 +633,20 @@ impl Viewer {
         self.opts.prefetch = prefetch;
     }
 
+    /// Turns geomorphing on or off from the next frame on.
+    pub fn set_morph(&mut self, enabled: bool) {
+        for m in &mut self.models {
+            m.scheduler.set_morph(enabled);
+        }
+        self.opts.morph.enabled = enabled;
+    }
+
+    /// Whether a model's arrival blend is still running (draw again even if nothing
+    /// else changed).
+    pub fn morphing(&self) -> bool {
+        self.models.iter().any(|m| m.scheduler.morphing())
+    }
+
     /// Changes the display options from the next frame on.
     pub fn set_shading(&mut self, shading: Shading) {
         self.opts.shading = shading;
@@ -673,15 +697,18 @@ fn node_levels(index: &ModelIndex) -> Vec<u8> {
     index.nodes().iter().map(|n| n.level).collect()
 }
 
+/// One model's part of a pass: its number, the nodes drawn and their morph ratios.
+type Draws<'a> = (u32, &'a [u32], &'a [f32]);
+
 /// Encodes and submits one render pass drawing the resident nodes of each (model,
-/// index, nodes) into the offscreen target; `clear` starts the frame, otherwise the
+/// nodes, ratios) into the offscreen target; `clear` starts the frame, otherwise the
 /// pass adds to what is there.
 fn submit_pass(
     gpu: &Gpu,
     renderer: &Renderer,
     (color, depth): (&wgpu::TextureView, &wgpu::TextureView),
     cache: &GpuCache,
-    draws: &[(u32, &ModelIndex, &[u32])],
+    draws: &[Draws],
     clear: bool,
 ) {
     let mut enc = gpu
@@ -689,11 +716,12 @@ fn submit_pass(
         .create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("tessera frame encoder"),
         });
-    let slots = draws.iter().flat_map(|&(model, _, nodes)| {
-        nodes
-            .iter()
-            .filter_map(move |&n| cache.slot_of(model, n).map(|s| (model, s)))
+    let slots = draws.iter().flat_map(|&(model, nodes, ratios)| {
+        nodes.iter().enumerate().filter_map(move |(k, &n)| {
+            let r = ratios.get(k).copied().unwrap_or(0.0);
+            cache.slot_of(model, n).map(|s| (model, s, r))
+        })
     });
-    renderer.encode_models_pass(&mut enc, color, depth, cache, slots, clear);
+    renderer.encode_models_pass(&gpu.device, &mut enc, color, depth, cache, slots, clear);
     gpu.queue.submit([enc.finish()]);
 }

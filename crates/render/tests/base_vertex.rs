@@ -45,7 +45,10 @@ fn draw(gpu: &Gpu, base_vertex: bool) -> Image {
         .device
         .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
     let slots: Vec<_> = (0..3).filter_map(|n| cache.slot(n).cloned()).collect();
-    r.encode_pass(&mut enc, color, depth, &cache, slots.iter(), true);
+    // Ratio 0.5: the targets of the test patches (if any) are drawn halfway, the same
+    // way on both paths.
+    let slots = slots.iter().map(|s| (s, 0.5));
+    r.encode_pass(&gpu.device, &mut enc, color, depth, &cache, slots, true);
     gpu.queue.submit([enc.finish()]);
     r.read_offscreen(&gpu.device, &gpu.queue).expect("readback")
 }

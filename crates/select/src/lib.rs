@@ -26,6 +26,7 @@ pub mod extract;
 #[doc(hidden)]
 pub mod fuzzing;
 pub mod merge;
+pub mod morph;
 pub mod path;
 pub mod residency;
 pub mod select;
@@ -35,6 +36,7 @@ pub use edges::{edge_report, EdgeReport};
 #[cfg(feature = "extract")]
 pub use extract::{extract_nodes, write_cut_ply, Extracted};
 pub use merge::{merge_patches, CutMesh, PatchRef};
+pub use morph::{group_ratio, morph_ratio, refinement_ratio, DEFAULT_MORPH_WINDOW};
 pub use path::{CameraPath, PathError, PATH_FIELDS};
 pub use residency::{
     predict_camera, prefetch_set, select_resident, should_unload, wants_refinement, HotNode,

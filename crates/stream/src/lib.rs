@@ -22,6 +22,7 @@
 
 mod groups;
 mod lru;
+mod morph;
 mod scheduler;
 mod source;
 mod split;
@@ -29,6 +30,7 @@ mod store;
 
 pub use groups::Groups;
 pub use lru::{Lru, PREFERENCE_WINDOW};
+pub use morph::{MorphOptions, MorphSummary, LATE_RATIO};
 pub use scheduler::{
     decoded_bytes, default_clock, Clock, CompleteError, FrameStats, Mode, Scheduler,
     SchedulerOptions, MAX_UPLOAD_ROUNDS, PREFETCH_GROWTH, UNLOAD_GROWTH,

@@ -33,6 +33,7 @@ use tessera_select::{
 
 use crate::groups::{Groups, Readiness};
 use crate::lru::Lru;
+use crate::morph::{Morph, MorphOptions, MorphSummary};
 use crate::source::{Answer, PatchSource};
 use crate::store::{ResidentStore, StoreError};
 
@@ -47,6 +48,9 @@ pub const UNLOAD_GROWTH: f32 = 2.0;
 const VISIBLE_PRIORITY: f32 = 1e6;
 /// Highest priority a prefetch request gets.
 const PREFETCH_PRIORITY_MAX: f32 = 1e5;
+/// Priority of the view's whole cut while groups wait for an arrival blend: visible
+/// work, after the nodes the cut misses now.
+const DEMAND_PRIORITY: f32 = VISIBLE_PRIORITY;
 /// Patches read per batch by a complete frame.
 const COMPLETE_BATCH: usize = 64;
 /// Backoff before an unavailable patch is asked for again (doubling per failed try)...
@@ -104,6 +108,8 @@ pub struct SchedulerOptions {
     pub prefetch: bool,
     /// Clock for the selection-time statistic.
     pub clock: Clock,
+    /// Geomorphing: the ratios of [`Scheduler::morph_ratios`] and the arrival blend.
+    pub morph: MorphOptions,
 }
 
 impl Default for SchedulerOptions {
@@ -117,6 +123,7 @@ impl Default for SchedulerOptions {
             upload_budget_bytes: 32 << 20,
             prefetch: true,
             clock: default_clock,
+            morph: MorphOptions::default(),
         }
     }
 }
@@ -164,6 +171,13 @@ pub struct FrameStats {
     pub wanted_bytes: u64,
     /// The store budget this frame ran under ([`Scheduler::set_budgets`]).
     pub gpu_budget_bytes: u64,
+    /// Mean morph ratio over the drawn non-root nodes (0: every one at its own shape).
+    pub morph_mean: f32,
+    /// Largest morph ratio drawn.
+    pub morph_max: f32,
+    /// Groups blending in after arriving late, and groups waiting for such a blend
+    /// before they refine (progressive frames): the view is still changing.
+    pub morph_blending: usize,
 }
 
 impl FrameStats {
@@ -191,6 +205,13 @@ impl FrameStats {
             out.index_wants += s.index_wants;
             out.wanted_bytes += s.wanted_bytes;
             out.gpu_budget_bytes += s.gpu_budget_bytes;
+            // Weighted by nodes drawn (divided below).
+            out.morph_mean += s.morph_mean * s.selected_nodes as f32;
+            out.morph_max = out.morph_max.max(s.morph_max);
+            out.morph_blending += s.morph_blending;
+        }
+        if out.selected_nodes > 0 {
+            out.morph_mean /= out.selected_nodes as f32;
         }
         out
     }
@@ -252,6 +273,11 @@ pub struct Scheduler {
     prefetch: Vec<(u32, f32)>,
     prev_camera: Option<(Camera, f64)>,
     answers: Vec<Answer>,
+    /// Morph ratios of the drawn nodes and the arrival blend.
+    morph: Morph,
+    last_morph: MorphSummary,
+    /// Groups the last selection found complete but kept waiting for an arrival blend.
+    blocked: Vec<u32>,
 }
 
 /// What the store holds, by node and by group, and the groups' LRU order. Apart from
@@ -394,6 +420,9 @@ impl Scheduler {
             prefetch: Vec::new(),
             prev_camera: None,
             answers: Vec::new(),
+            morph: Morph::new(n, g),
+            last_morph: MorphSummary::default(),
+            blocked: Vec::new(),
         }
     }
 
@@ -452,6 +481,7 @@ impl Scheduler {
         // (When not stable, evicting every group above cleared both.)
         self.res.resident.resize(n, false);
         self.res.members.resize(g, 0);
+        self.morph.resize(n, g);
     }
 
     /// Nodes the index shows.
@@ -603,6 +633,7 @@ impl Scheduler {
         self.evict_to_budget(None, store);
         self.sel.draw.clear();
         self.sel.missing.clear();
+        self.morph.ratios.clear();
         self.demand.draw.clear();
         self.prefetch.clear();
         source.request(&[]);
@@ -621,30 +652,15 @@ impl Scheduler {
         let (groups, failed) = (&self.groups, &self.failed);
         let ok = |n: u32| failed.is_empty() || !group_failed(groups, failed, groups.of(n));
         select_resident(&self.nv, view, &ok, &mut self.demand);
-        self.epoch += 1;
-        let stamp = self.epoch;
-        let mut bytes = 0u64;
-        let mut stack: Vec<u32> = Vec::new();
-        for &n in &self.demand.draw {
-            stack.push(self.groups.of(n));
-            while let Some(g) = stack.pop() {
-                if self.visit[g as usize] == stamp {
-                    continue;
-                }
-                self.visit[g as usize] = stamp;
-                bytes += self
-                    .groups
-                    .members(g)
-                    .iter()
-                    .map(|&m| {
-                        let f = self.facts[m as usize];
-                        store.estimate_bytes(f.vertices, f.triangles)
-                    })
-                    .sum::<u64>();
-                stack.extend_from_slice(self.groups.dependencies(g));
-            }
-        }
-        bytes
+        let starts = self.demand.draw.iter().map(|&n| groups.of(n));
+        let all = group_closure(groups, &mut self.visit, &mut self.epoch, starts);
+        all.iter()
+            .flat_map(|&g| groups.members(g))
+            .map(|&m| {
+                let f = self.facts[m as usize];
+                store.estimate_bytes(f.vertices, f.triangles)
+            })
+            .sum()
     }
 
     /// The residency groups.
@@ -655,6 +671,55 @@ impl Scheduler {
     /// Nodes drawn by the last frame, depth-first order.
     pub fn draw(&self) -> &[u32] {
         &self.sel.draw
+    }
+
+    /// The morph ratio of each node of [`Scheduler::draw`] (same order): 0 draws a
+    /// node's own shape, 1 its parent's (see `tessera_select::morph` and
+    /// [`crate::MorphOptions`]). All zero with morphing off.
+    pub fn morph_ratios(&self) -> &[f32] {
+        &self.morph.ratios
+    }
+
+    /// Turns geomorphing on or off from the next frame on (a viewer's toggle).
+    pub fn set_morph(&mut self, enabled: bool) {
+        self.opts.morph.enabled = enabled;
+    }
+
+    /// Whether an arrival blend is still running (a front end that draws only on change
+    /// keeps drawing until it ends).
+    pub fn morphing(&self) -> bool {
+        self.last_morph.blending > 0
+    }
+
+    /// Arrival blend duration in effect (0 when morphing is off).
+    fn blend_s(&self) -> f64 {
+        if self.opts.morph.enabled {
+            self.opts.morph.arrival_blend_s.max(0.0)
+        } else {
+            0.0
+        }
+    }
+
+    /// The ratios of the final cut of this frame, into `stats`.
+    fn update_morph(&mut self, view: &ViewParams, blend: bool, now: f64, stats: &mut FrameStats) {
+        let m = self.morph.update(
+            &self.nv,
+            &self.groups,
+            view,
+            &self.sel.draw,
+            &self.opts.morph,
+            blend,
+            self.frame,
+            now,
+        );
+        stats.morph_mean = m.mean;
+        stats.morph_max = m.max;
+        // Groups kept waiting for a blend count too: the view is still changing.
+        stats.morph_blending = m.blending + self.blocked.len();
+        self.last_morph = MorphSummary {
+            blending: stats.morph_blending,
+            ..m
+        };
     }
 
     /// Nodes known to fail.
@@ -798,8 +863,20 @@ impl Scheduler {
     fn select_resident_now(&mut self, view: &ViewParams) {
         self.epoch += 1;
         let epoch = self.epoch;
-        let (groups, res) = (&self.groups, &self.res);
-        let complete = |g: u32| res.complete(groups, g);
+        let (nv, groups, res, morph) = (&self.nv, &self.groups, &self.res, &self.morph);
+        let (frame, blend_s) = (self.frame, self.blend_s());
+        // A group whose parent group blends in waits (see `crate::morph`).
+        let blocked = std::cell::RefCell::new(std::mem::take(&mut self.blocked));
+        blocked.borrow_mut().clear();
+        let complete = |g: u32| {
+            res.complete(groups, g) && {
+                let b = morph.blocks(nv, groups, g, frame, blend_s);
+                if b {
+                    blocked.borrow_mut().push(g);
+                }
+                !b
+            }
+        };
         let readiness = std::cell::RefCell::new(&mut self.readiness);
         let usable = |n: u32| {
             readiness
@@ -807,25 +884,49 @@ impl Scheduler {
                 .ready(groups, groups.of(n), epoch, &complete)
         };
         select_resident(&self.nv, view, &usable, &mut self.sel);
+        // Only groups held back by the blend alone count as waiting (a group whose
+        // dependencies are not ready would not be drawn anyway).
+        let mut blocked = std::mem::take(&mut *blocked.borrow_mut());
+        blocked.retain(|&g| {
+            groups
+                .dependencies(g)
+                .iter()
+                .all(|&d| readiness.borrow_mut().ready(groups, d, epoch, &complete))
+        });
+        blocked.sort_unstable();
+        blocked.dedup();
+        self.blocked = blocked;
+    }
+
+    /// While groups wait for their parents' arrival blend, the selection does not reach
+    /// below them, so it would not ask for what lies there: ask for the view's whole cut
+    /// (its demand, as if everything were resident) instead, below the visible
+    /// priorities and above the prefetch, so the levels below load during the blend.
+    fn want_demand(&mut self, wanted: &mut Vec<(u32, f32)>) {
+        let groups = &self.groups;
+        let starts = self.demand.draw.iter().map(|&n| groups.of(n));
+        for g in group_closure(groups, &mut self.visit, &mut self.epoch, starts) {
+            for &m in groups.members(g) {
+                if !self.res.resident[m as usize]
+                    && !self.ram.contains(m)
+                    && !self.failed.contains(&m)
+                {
+                    wanted.push((m, DEMAND_PRIORITY));
+                }
+            }
+        }
     }
 
     /// Marks the groups of the drawn nodes and everything they depend on (which
     /// includes the groups of all their ancestors) as used in this frame: evicting any
     /// of them would make a drawn group unusable.
     fn touch_draw_set(&mut self) {
-        self.epoch += 1;
-        let stamp = self.epoch;
-        let mut stack: Vec<u32> = Vec::new();
-        for &n in &self.sel.draw {
-            stack.push(self.groups.of(n));
-            while let Some(g) = stack.pop() {
-                if self.visit[g as usize] == stamp {
-                    continue;
-                }
-                self.visit[g as usize] = stamp;
-                self.res.lru.touch(g, self.frame);
-                stack.extend_from_slice(self.groups.dependencies(g));
-            }
+        let groups = &self.groups;
+        // Groups waiting for an arrival blend are used as well: they are drawn next.
+        let starts = self.sel.draw.iter().map(|&n| groups.of(n));
+        let starts = starts.chain(self.blocked.iter().copied());
+        for g in group_closure(groups, &mut self.visit, &mut self.epoch, starts) {
+            self.res.lru.touch(g, self.frame);
         }
     }
 
@@ -876,6 +977,7 @@ impl Scheduler {
         self.collect(source);
         let view = self.view_params(camera);
         self.evict_to_budget(Some(&view), store);
+        self.morph.set_now(time_s);
         let ts = clock();
         self.select_resident_now(&view);
         let draw_before: FxHashSet<u32> = self.sel.draw.iter().copied().collect();
@@ -1014,6 +1116,9 @@ impl Scheduler {
             self.touch_draw_set();
             stats.selection_ms += clock() - ts;
         }
+        if !self.blocked.is_empty() {
+            self.want_demand(&mut wanted);
+        }
         // Prefetch: lower priorities than anything visible.
         for &(n, pri) in &self.prefetch {
             if !self.res.resident[n as usize] && !self.ram.contains(n) && !self.failed.contains(&n)
@@ -1037,6 +1142,9 @@ impl Scheduler {
             .filter(|n| draw_before.contains(n))
             .count();
         stats.passes = 1;
+        let ts = clock();
+        self.update_morph(&view, true, time_s, &mut stats);
+        stats.selection_ms += clock() - ts;
         self.prev_camera = Some((camera.clone(), time_s));
         self.finish_stats(&mut stats, store);
         stats
@@ -1051,7 +1159,7 @@ impl Scheduler {
         camera: &Camera,
         source: &mut S,
         store: &mut R,
-        mut pass: impl FnMut(&mut R, &[u32], bool) -> Result<(), E>,
+        mut pass: impl FnMut(&mut R, &[u32], &[f32], bool) -> Result<(), E>,
     ) -> Result<FrameStats, CompleteError<E>>
     where
         S: PatchSource + ?Sized,
@@ -1064,6 +1172,7 @@ impl Scheduler {
         self.collect(source);
         let ts = clock();
         let full = self.opts.mode == Mode::FullResolution;
+        let view = self.view_params(camera);
         if full {
             self.sel.draw.clear();
             self.sel.missing.clear();
@@ -1075,11 +1184,17 @@ impl Scheduler {
                     .filter(|n| !failed.contains(n)),
             );
         } else {
-            let view = self.view_params(camera);
             let (failed, groups) = (&self.failed, &self.groups);
             // Everything counts as resident except groups with a failed member.
             let ok = |n: u32| !group_failed(groups, failed, groups.of(n));
             select_resident(&self.nv, &view, &ok, &mut self.sel);
+        }
+        if full {
+            // Every leaf at its own shape.
+            self.morph.ratios.clear();
+            self.morph.ratios.resize(self.sel.draw.len(), 0.0);
+        } else {
+            self.update_morph(&view, false, 0.0, &mut stats);
         }
         stats.selection_ms = clock() - ts;
 
@@ -1154,10 +1269,11 @@ impl Scheduler {
                 store.flush();
             }
             // One pass over what is resident and not drawn yet.
-            let mut nodes = Vec::new();
+            let (mut nodes, mut ratios) = (Vec::new(), Vec::new());
             for (i, &n) in self.sel.draw.iter().enumerate() {
                 if !drawn[i] && self.res.resident[n as usize] {
                     nodes.push(n);
+                    ratios.push(self.morph.ratios[i]);
                     drawn[i] = true;
                 }
             }
@@ -1167,7 +1283,7 @@ impl Scheduler {
             if nodes.is_empty() && full_now {
                 return Err(CompleteError::StoreTooSmall);
             }
-            pass(store, &nodes, !cleared).map_err(CompleteError::Pass)?;
+            pass(store, &nodes, &ratios, !cleared).map_err(CompleteError::Pass)?;
             cleared = true;
             stats.passes += 1;
             if next >= todo.len() {
@@ -1227,6 +1343,29 @@ fn projected_error(view: &ViewParams, error: f32, sphere: [f32; 4]) -> f32 {
     } else {
         error * view.px_per_unit / d
     }
+}
+
+/// The groups `starts` and, transitively, every group they depend on, each once (the
+/// `visit` stamps of a fresh `epoch` mark those seen).
+fn group_closure(
+    groups: &Groups,
+    visit: &mut [u64],
+    epoch: &mut u64,
+    starts: impl IntoIterator<Item = u32>,
+) -> Vec<u32> {
+    *epoch += 1;
+    let stamp = *epoch;
+    let mut out = Vec::new();
+    let mut stack: Vec<u32> = starts.into_iter().collect();
+    while let Some(g) = stack.pop() {
+        if visit[g as usize] == stamp {
+            continue;
+        }
+        visit[g as usize] = stamp;
+        out.push(g);
+        stack.extend_from_slice(groups.dependencies(g));
+    }
+    out
 }
 
 /// Whether a member of group `g` failed (such a group can never be complete).

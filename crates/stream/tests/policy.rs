@@ -291,7 +291,9 @@ fn settle(
         store.frame += 1;
         *t += 1.0 / 60.0;
         let st = s.frame(cam, *t, src, store);
-        if st.pending_loads == 0 && st.patches_uploaded == 0 && i > 0 {
+        // Settled: nothing loading, nothing uploaded, no group still blending in (its
+        // children wait for it).
+        if st.pending_loads == 0 && st.patches_uploaded == 0 && st.morph_blending == 0 && i > 0 {
             return i;
         }
     }
@@ -560,7 +562,7 @@ fn every_source_reaches_the_same_cut() {
             assert!(start.elapsed().as_secs() < 60, "pager did not settle");
             t += 0.01;
             let st = s.frame(&cam, t, &mut pager, &mut store);
-            quiet = if st.pending_loads == 0 && st.patches_uploaded == 0 {
+            quiet = if st.pending_loads == 0 && st.patches_uploaded == 0 && st.morph_blending == 0 {
                 quiet + 1
             } else {
                 0
@@ -581,7 +583,7 @@ fn every_source_reaches_the_same_cut() {
         );
         let mut store = FakeStore::new(u64::MAX);
         let mut src = TestSource::new(m.clone(), 0);
-        s.complete_frame(&cam, &mut src, &mut store, |_, _, _| Ok::<(), ()>(()))
+        s.complete_frame(&cam, &mut src, &mut store, |_, _, _, _| Ok::<(), ()>(()))
             .unwrap();
         let mut d = s.draw().to_vec();
         d.sort_unstable();
@@ -688,7 +690,7 @@ fn lowered_budgets_evict_down_at_the_next_frame() {
     };
     for _ in 0..500 {
         let st = frame(&mut s, &mut src, &mut store);
-        if st.pending_loads == 0 && st.patches_uploaded == 0 {
+        if st.pending_loads == 0 && st.patches_uploaded == 0 && st.morph_blending == 0 {
             break;
         }
     }
@@ -751,7 +753,7 @@ fn lowered_budgets_evict_down_at_the_next_frame() {
     let mut last = None;
     for _ in 0..500 {
         let st = frame(&mut s, &mut src, &mut store);
-        let done = st.pending_loads == 0 && st.patches_uploaded == 0;
+        let done = st.pending_loads == 0 && st.patches_uploaded == 0 && st.morph_blending == 0;
         last = Some(st);
         if done {
             break;
@@ -763,4 +765,268 @@ fn lowered_budgets_evict_down_at_the_next_frame() {
         "raised again, the cut refines back"
     );
     assert_eq!(store.bytes, full);
+}
+
+// ---------------------------------------------------------------------------------
+// Geomorphing.
+
+/// The cut drawn with its morph ratios, as the vertex shader moves it (`p + (t - p) *
+/// r` in f32 in the local frame), welded by bit-identical positions, as an edge
+/// report: a crack opened by morphing is a boundary edge here. Triangles that collapse
+/// (ratio exactly 1 folds a removed vertex onto its survivor) are degenerate and skipped.
+fn morphed_cut_edges(m: &Model, draw: &[u32], ratios: &[f32]) -> tessera_select::EdgeReport {
+    let step = m.index().grid().step();
+    let moved: Vec<(Vec<[u32; 3]>, Vec<u32>)> = draw
+        .iter()
+        .zip(ratios)
+        .map(|(&n, &r)| {
+            let p = m.decode_patch(n as usize).unwrap();
+            let pos = p
+                .positions
+                .iter()
+                .enumerate()
+                .map(|(i, q)| {
+                    let t = p.morph_targets.get(i).unwrap_or(q);
+                    std::array::from_fn(|k| {
+                        let a = (f64::from(q[k]) * step) as f32;
+                        let b = (f64::from(t[k]) * step) as f32;
+                        (a + (b - a) * r).to_bits()
+                    })
+                })
+                .collect();
+            (pos, p.indices)
+        })
+        .collect();
+    let mesh = merge_patches(moved.iter().map(|(pos, idx)| PatchRef {
+        positions: pos,
+        normals: &[],
+        colors: &[],
+        uvs: &[],
+        indices: idx,
+    }));
+    edge_report(&mesh.indices, &mesh.positions)
+}
+
+/// A dolly from far to close, and back a little.
+fn dolly(m: &Model, frames: usize) -> Vec<Camera> {
+    (0..frames)
+        .map(|i| {
+            let f = i as f64 / (frames - 1) as f64;
+            let d = if f < 0.8 {
+                3.0 - 2.2 * f / 0.8
+            } else {
+                0.8 + (f - 0.8) * 2.0
+            };
+            camera(m, d, 20.0 + 40.0 * f)
+        })
+        .collect()
+}
+
+/// Every group's nodes share one ratio in [0, 1]; roots are at 0; a group one of whose
+/// members is refined (an ancestor of a drawn node) is at 0 (the rule that keeps the
+/// refined member's locked border and its siblings' moved vertices together).
+fn check_ratio_rules(s: &Scheduler, m: &Model) -> (f32, usize) {
+    let draw = s.draw();
+    let ratios = s.morph_ratios();
+    assert_eq!(draw.len(), ratios.len());
+    let nodes = m.nodes();
+    let mut by_group: FxHashMap<u32, f32> = FxHashMap::default();
+    let mut refined: FxHashSet<u32> = FxHashSet::default();
+    for &n in draw {
+        let mut p = nodes[n as usize].parent;
+        while p != u32::MAX {
+            refined.insert(p);
+            p = nodes[p as usize].parent;
+        }
+    }
+    let mut max = 0.0f32;
+    let mut morphing = 0;
+    for (&n, &r) in draw.iter().zip(ratios) {
+        assert!((0.0..=1.0).contains(&r), "node {n}: ratio {r}");
+        if nodes[n as usize].parent == u32::MAX {
+            assert_eq!(r, 0.0, "root {n} morphs");
+        }
+        let g = s.groups().of(n);
+        let prev = *by_group.entry(g).or_insert(r);
+        assert_eq!(prev, r, "group {g}: ratios {prev} and {r}");
+        if r > 0.0 {
+            morphing += 1;
+            for &x in s.groups().members(g) {
+                assert!(
+                    !refined.contains(&x),
+                    "group {g} morphs ({r}) with {x} refined"
+                );
+            }
+        }
+        max = max.max(r);
+    }
+    (max, morphing)
+}
+
+/// Random cameras, several tolerances, complete frames and progressive ones with
+/// patches trickling in (late groups blending in): the rules of `check_ratio_rules`
+/// hold on every frame, and the morphed cut stays a closed manifold, i.e. no crack
+/// opens at any ratio reached.
+#[test]
+fn morphing_never_opens_a_crack() {
+    let m = model();
+    let mut rng = 0x2545_f491_4f6c_dd1du64;
+    let mut next = move || {
+        rng ^= rng >> 12;
+        rng ^= rng << 25;
+        rng ^= rng >> 27;
+        (rng.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let (mut frames, mut morphed_frames, mut top) = (0, 0, 0.0f32);
+    for tolerance in [0.5f32, 2.0, 6.0] {
+        for mode in [Mode::Complete, Mode::Progressive] {
+            let mut s = Scheduler::new(
+                m.index(),
+                SchedulerOptions {
+                    cull: false,
+                    tolerance_px: tolerance,
+                    mode,
+                    ..options(64 << 20)
+                },
+            );
+            let mut src = TestSource::new(m.clone(), 6).chaotic();
+            let mut store = FakeStore::new(u64::MAX);
+            s.load_roots(&mut src, &mut store);
+            let mut cams: Vec<Camera> = dolly(&m, 24);
+            cams.extend((0..8).map(|_| camera(&m, 0.7 + 2.5 * next(), 360.0 * next())));
+            for (i, cam) in cams.iter().enumerate() {
+                store.frame += 1;
+                if mode == Mode::Complete {
+                    s.complete_frame(cam, &mut src, &mut store, |_, _, _, _| Ok::<(), ()>(()))
+                        .unwrap();
+                } else {
+                    s.frame(cam, i as f64 * 0.05, &mut src, &mut store);
+                }
+                let (max, morphing) = check_ratio_rules(&s, &m);
+                top = top.max(max);
+                frames += 1;
+                if morphing == 0 {
+                    continue;
+                }
+                morphed_frames += 1;
+                let e = morphed_cut_edges(&m, s.draw(), s.morph_ratios());
+                assert_eq!(
+                    e.boundary_edges, 0,
+                    "tolerance {tolerance}, {mode:?}, frame {i}: {e:?}"
+                );
+                // At exactly 1 (a late group's first frame) removed vertices sit on
+                // their survivors and triangles fold onto the parent's; below 1 the
+                // topology is the cut's own.
+                if s.morph_ratios().iter().all(|&r| r < 1.0) {
+                    assert_eq!(
+                        e.nonmanifold_edges, 0,
+                        "tolerance {tolerance}, {mode:?}, frame {i}: {e:?}"
+                    );
+                }
+            }
+        }
+    }
+    eprintln!("{morphed_frames} of {frames} frames morphing, largest ratio {top}");
+    assert!(
+        morphed_frames * 2 > frames,
+        "too few frames morph: {morphed_frames}"
+    );
+    assert!(top > 0.5, "ratios stay small: {top}");
+}
+
+/// A camera that stops keeps its cut and its ratios: nothing oscillates at a threshold.
+#[test]
+fn a_stopped_camera_keeps_its_ratios() {
+    let m = model();
+    let cams = dolly(&m, 40);
+    let mut s = Scheduler::new(m.index(), options(64 << 20));
+    let mut src = TestSource::new(m.clone(), 8);
+    let mut store = FakeStore::new(u64::MAX);
+    s.load_roots(&mut src, &mut store);
+    let mut t = 0.0;
+    for cam in &cams[..20] {
+        store.frame += 1;
+        t += 1.0 / 60.0;
+        s.frame(cam, t, &mut src, &mut store);
+    }
+    let stop = &cams[20];
+    settle(&mut s, stop, &mut src, &mut store, &mut t, 600);
+    let (draw, ratios) = (s.draw().to_vec(), s.morph_ratios().to_vec());
+    assert!(
+        ratios.iter().any(|&r| r > 0.0),
+        "nothing morphs at the stop"
+    );
+    for _ in 0..120 {
+        store.frame += 1;
+        t += 1.0 / 60.0;
+        let st = s.frame(stop, t, &mut src, &mut store);
+        assert_eq!(s.draw(), draw.as_slice());
+        assert_eq!(s.morph_ratios(), ratios.as_slice());
+        assert_eq!(st.morph_blending, 0);
+    }
+}
+
+/// Patches that arrive after the view wanted them: each newly refined group whose view
+/// ratio is well below 1 is drawn at ratio 1 (its parent's exact shape) in its first
+/// frame, then blends to its view ratio within the blend time (0.25 s); the view is
+/// not converged (`morph_blending`) until then.
+#[test]
+fn a_late_group_enters_at_its_parents_shape() {
+    let m = model();
+    let cam = camera(&m, 1.1, 40.0);
+    let mut s = Scheduler::new(m.index(), options(64 << 20));
+    let mut src = TestSource::new(m.clone(), 4);
+    let mut store = FakeStore::new(u64::MAX);
+    s.load_roots(&mut src, &mut store);
+    let nv = tessera_select::NodeView::new(m.header(), m.nodes());
+    let view = tessera_select::ViewParams::new(&cam, m.header().cube_origin, 0.5, true);
+    let view_ratio =
+        |s: &Scheduler, g: u32| tessera_select::group_ratio(&nv, &view, s.groups().members(g), 2.0);
+    let mut t = 0.0;
+    let mut prev: FxHashSet<u32> = FxHashSet::default();
+    let mut first_seen: FxHashMap<u32, f64> = FxHashMap::default();
+    let (mut late, mut blended) = (0, 0);
+    for _ in 0..400 {
+        store.frame += 1;
+        t += 1.0 / 60.0;
+        let st = s.frame(&cam, t, &mut src, &mut store);
+        let groups: FxHashMap<u32, f32> = s
+            .draw()
+            .iter()
+            .zip(s.morph_ratios())
+            .filter(|(&n, _)| m.nodes()[n as usize].parent != u32::MAX)
+            .map(|(&n, &r)| (s.groups().of(n), r))
+            .collect();
+        for (&g, &r) in &groups {
+            let v = view_ratio(&s, g);
+            if !prev.contains(&g) && !first_seen.contains_key(&g) {
+                first_seen.insert(g, t);
+                if v < 0.9 {
+                    late += 1;
+                    assert_eq!(r, 1.0, "late group {g} enters at {r}, view ratio {v}");
+                    assert!(st.morph_blending > 0);
+                }
+            }
+            let age = t - first_seen[&g];
+            if age > 0.25 + 1e-9 {
+                assert!(
+                    (r - v).abs() < 1e-6,
+                    "group {g} at {r} after {age} s, view {v}"
+                );
+                blended += 1;
+            } else {
+                assert!(
+                    r >= v - 1e-6,
+                    "group {g} below its view ratio while blending"
+                );
+            }
+        }
+        prev = groups.keys().copied().collect();
+        if st.pending_loads == 0 && st.patches_uploaded == 0 && st.morph_blending == 0 {
+            break;
+        }
+    }
+    assert!(late >= 3, "only {late} late groups");
+    assert!(blended > 0);
+    assert!(s.draw().iter().any(|&n| m.nodes()[n as usize].level >= 4));
 }

@@ -291,6 +291,10 @@ impl Running {
                 ram_budget_bytes: ram_budget,
                 loader_threads: args.loaders.max(1),
                 prefetch: args.prefetch,
+                morph: tessera_render::MorphOptions {
+                    enabled: args.morph,
+                    ..Default::default()
+                },
                 ..Default::default()
             },
         )?;
@@ -331,7 +335,7 @@ impl Running {
             egui_state,
             egui_renderer,
             nav,
-            hud: Hud::new(args.tolerance_px, args.prefetch),
+            hud: Hud::new(args.tolerance_px, args.prefetch, args.morph),
             picker: Picker::new(models),
             input: Input::default(),
             names,
@@ -366,6 +370,7 @@ impl Running {
             || self.stats.pending_loads > 0
             || self.stats.cache_misses > 0
             || self.stats.index_wants > 0
+            || self.stats.morph_blending > 0
             || {
                 let p = self.viewer.pager_stats();
                 p.queued + p.in_flight > 0
@@ -480,6 +485,9 @@ impl Running {
         }
         if self.hud.prefetch != self.viewer.options().prefetch {
             self.viewer.set_prefetch(self.hud.prefetch);
+        }
+        if self.hud.morph != self.viewer.options().morph.enabled {
+            self.viewer.set_morph(self.hud.morph);
         }
         let shading = Shading {
             light: if self.hud.directional {
@@ -901,6 +909,7 @@ impl Running {
             KeyCode::KeyX => self.hud.wireframe = !self.hud.wireframe,
             KeyCode::KeyL => self.hud.directional = !self.hud.directional,
             KeyCode::KeyB => self.hud.unlit = !self.hud.unlit,
+            KeyCode::KeyG => self.hud.morph = !self.hud.morph,
             KeyCode::KeyN => {
                 use tessera_render::ColorMode::*;
                 self.hud.color_mode = match self.hud.color_mode {

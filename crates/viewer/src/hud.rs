@@ -19,6 +19,8 @@ pub struct Hud {
     pub wireframe: bool,
     pub freeze: bool,
     pub prefetch: bool,
+    /// Geomorphing between levels.
+    pub morph: bool,
     pub unlit: bool,
     /// Directional light instead of the head light.
     pub directional: bool,
@@ -31,7 +33,7 @@ pub struct Hud {
 }
 
 impl Hud {
-    pub fn new(tolerance_px: f32, prefetch: bool) -> Hud {
+    pub fn new(tolerance_px: f32, prefetch: bool, morph: bool) -> Hud {
         Hud {
             visible: true,
             tolerance_px,
@@ -39,6 +41,7 @@ impl Hud {
             wireframe: false,
             freeze: false,
             prefetch,
+            morph,
             unlit: false,
             directional: false,
             light_azimuth_deg: 35.0,
@@ -212,6 +215,9 @@ pub fn draw(ctx: &egui::Context, hud: &mut Hud, info: &Info) -> Vec<Action> {
                 ui.label("pending loads");
                 ui.label(format!("{}", s.pending_loads));
                 ui.end_row();
+                ui.label("morph ratio");
+                ui.label(format!("mean {:.2}, max {:.2}", s.morph_mean, s.morph_max));
+                ui.end_row();
                 ui.label("read");
                 ui.label(format!("{:.1} MiB/s", info.bytes_read_per_s / 1048576.0));
                 ui.end_row();
@@ -242,6 +248,7 @@ pub fn draw(ctx: &egui::Context, hud: &mut Hud, info: &Info) -> Vec<Action> {
             });
             ui.horizontal(|ui| {
                 ui.checkbox(&mut hud.prefetch, "prefetch");
+                ui.checkbox(&mut hud.morph, "morph (G)");
                 ui.checkbox(&mut hud.unlit, "unlit (B)");
             });
             ui.horizontal(|ui| {

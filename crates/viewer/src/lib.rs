@@ -47,6 +47,8 @@ pub struct ViewArgs {
     /// Save the last frame here on exit.
     pub screenshot: Option<PathBuf>,
     pub prefetch: bool,
+    /// Geomorphing between levels (`--no-morph` turns it off; G and the HUD toggle it).
+    pub morph: bool,
     /// Window size (inner, physical pixels).
     pub width: u32,
     pub height: u32,

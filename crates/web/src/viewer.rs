@@ -481,6 +481,7 @@ impl Viewer {
         let converged = self.stats.pending_loads == 0
             && self.stats.cache_misses == 0
             && self.stats.index_wants == 0
+            && self.stats.morph_blending == 0
             && fetch.pending() == 0
             && fetch.undecoded() == 0
             && !self.growing.get()
@@ -570,9 +571,14 @@ impl Viewer {
                 label: Some("tessera web frame"),
             });
         let cache = &self.cache;
-        let slots = self.scheduler.draw().iter().filter_map(|&n| cache.slot(n));
+        let ratios = self.scheduler.morph_ratios();
+        let slots = self.scheduler.draw().iter().enumerate().filter_map(|(k, &n)| {
+            let r = ratios.get(k).copied().unwrap_or(0.0);
+            cache.slot(n).map(|s| (s, r))
+        });
+        let device = &self.gpu.device;
         self.renderer
-            .encode_pass(&mut enc, &view, &self.depth, cache, slots, true);
+            .encode_pass(device, &mut enc, &view, &self.depth, cache, slots, true);
         self.gpu.queue.submit([enc.finish()]);
         self.gpu.queue.present(frame);
     }
