@@ -10,7 +10,10 @@
 //! every two levels), saturated bottom-up, leaves 0: at 1 px tolerance and 1080 px a close
 //! view draws a few thousand nodes, like a real model. Then times
 //! `select_resident` (everything resident) + `prefetch_set` (growth 1.5, linear
-//! prediction from the previous frame) over 200 frames along orbits at several distances.
+//! prediction from the previous frame) over 200 frames along orbits at several distances,
+//! and the geomorphing ratios of the drawn nodes (issue 10 target: selection + ratios
+//! <= 1 ms at 10^5 nodes): `group_ratio` once per group of siblings (here a node's two
+//! children; a real diamond's group has 4-12), as the scheduler does.
 //!
 //! `cargo run --release -p tessera-select --example bench_select [depth] [frames] [tolerance_px]`
 
@@ -20,8 +23,8 @@ use bytemuck::Zeroable;
 use glam::Vec3;
 use tessera_format::{Header, NodeRecord, NO_NODE};
 use tessera_select::{
-    predict_camera, prefetch_set, select_resident, Camera, NodeView, Orbit, PrefetchOptions,
-    Selection, ViewParams,
+    group_ratio, predict_camera, prefetch_set, select_resident, Camera, NodeView, Orbit,
+    PrefetchOptions, Selection, ViewParams, DEFAULT_MORPH_WINDOW,
 };
 
 struct Region {
@@ -161,6 +164,11 @@ fn main() {
         };
         let mut times = Vec::with_capacity(frames);
         let mut sel_times = Vec::with_capacity(frames);
+        let mut morph_times = Vec::with_capacity(frames);
+        // Per parent: the frame its group's ratio was computed in, and the ratio.
+        let mut memo: Vec<(usize, f32)> = vec![(usize::MAX, 0.0); nodes.len()];
+        let mut ratios: Vec<f32> = Vec::new();
+        let mut morphing = 0usize;
         let (mut visited, mut drawn, mut prefetched) = (0usize, 0usize, 0usize);
         let mut prev = cam_at(0);
         // Frame 0 is a warm-up (output vectors grow to size), not timed.
@@ -170,6 +178,21 @@ fn main() {
             let view = ViewParams::new(&cam, header.cube_origin, tolerance_px, true);
             select_resident(&nv, &view, &|_| true, &mut sel);
             let t_sel = t.elapsed().as_secs_f64() * 1e6;
+            let tm = Instant::now();
+            ratios.clear();
+            for &n in &sel.draw {
+                let p = nv.nodes()[n as usize].parent;
+                if p == NO_NODE {
+                    ratios.push(0.0);
+                    continue;
+                }
+                if memo[p as usize].0 != f {
+                    let members = nv.nodes()[p as usize].children;
+                    memo[p as usize] = (f, group_ratio(&nv, &view, &members, DEFAULT_MORPH_WINDOW));
+                }
+                ratios.push(memo[p as usize].1);
+            }
+            let t_morph = tm.elapsed().as_secs_f64() * 1e6;
             let opts = PrefetchOptions {
                 sphere_growth: 1.5,
                 predicted: Some(predict_camera(&prev, &cam, 1.0 / 60.0, 0.25)),
@@ -180,6 +203,8 @@ fn main() {
             }
             times.push(t.elapsed().as_secs_f64() * 1e6);
             sel_times.push(t_sel);
+            morph_times.push(t_sel + t_morph);
+            morphing += ratios.iter().filter(|&&r| r > 0.0).count();
             visited += sel.visited + pre_visited;
             drawn += sel.draw.len();
             prefetched += pre.len();
@@ -188,17 +213,22 @@ fn main() {
         }
         times.sort_by(f64::total_cmp);
         sel_times.sort_by(f64::total_cmp);
+        morph_times.sort_by(f64::total_cmp);
         println!(
             "orbit radius {radius}: select_resident + prefetch_set per frame: best {:.1} us, \
              median {:.1} us, p95 {:.1} us, worst {:.1} us (select_resident alone: median \
-             {:.1} us); mean per frame: {} visited (both), {} drawn, {} prefetched",
+             {:.1} us; select_resident + morph ratios: median {:.1} us, worst {:.1} us); \
+             mean per frame: {} visited (both), {} drawn ({} morphing), {} prefetched",
             times[0],
             times[times.len() / 2],
             times[times.len() * 95 / 100],
             times[times.len() - 1],
             sel_times[sel_times.len() / 2],
+            morph_times[morph_times.len() / 2],
+            morph_times[morph_times.len() - 1],
             visited / frames,
             drawn / frames,
+            morphing / frames,
             prefetched / frames
         );
     }
