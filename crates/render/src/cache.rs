@@ -88,10 +88,17 @@ pub fn oct_snorm16(n: [f32; 3]) -> [i16; 2] {
 /// Converts a decoded patch to GPU vertices, positions in the local frame
 /// (`grid * quant_step`), morph targets with their attributes: a target is a surviving
 /// vertex of the parent's simplification, whose normal and colour are taken from the
-/// vertex of this patch at that position (one hash lookup per moving vertex, at upload
-/// only); a survivor that lives in a sibling patch lends none, and the vertex keeps its
-/// own attributes while it moves.
-pub fn gpu_vertices(p: &PatchData, quant_step: f64, out: &mut Vec<GpuVertex>) {
+/// vertex at that position in this patch, else in one of `siblings` (the other patches
+/// of its residency group: about 8% of the moving vertices of the Bunny and the Dragon
+/// move onto a survivor of a sibling); one hash lookup per moving vertex, at upload
+/// only. A survivor found nowhere lends nothing: the vertex keeps its own attributes
+/// while it moves.
+pub fn gpu_vertices(
+    p: &PatchData,
+    siblings: &[&PatchData],
+    quant_step: f64,
+    out: &mut Vec<GpuVertex>,
+) {
     out.clear();
     out.reserve(p.positions.len());
     let local = |q: &[u32; 3]| {
@@ -101,32 +108,31 @@ pub fn gpu_vertices(p: &PatchData, quant_step: f64, out: &mut Vec<GpuVertex>) {
             (q[2] as f64 * quant_step) as f32,
         ]
     };
-    let has_normals = p.normals.len() == p.positions.len();
-    let normal = |i: usize| {
-        if has_normals {
-            oct_snorm16(p.normals[i])
-        } else {
-            [0, 0]
-        }
+    let attributes = |p: &PatchData, i: usize| {
+        let n = match p.normals.get(i) {
+            Some(&n) if p.normals.len() == p.positions.len() => oct_snorm16(n),
+            _ => [0, 0],
+        };
+        (n, p.colors.get(i).copied().unwrap_or([255; 4]))
     };
-    let color = |i: usize| p.colors.get(i).copied().unwrap_or([255; 4]);
     let morphs = p.morph_targets.len() == p.positions.len()
         && p.morph_targets
             .iter()
             .zip(&p.positions)
             .any(|(t, q)| t != q);
-    let at: FxHashMap<[u32; 3], u32> = if morphs {
-        p.positions
-            .iter()
-            .enumerate()
-            .map(|(i, q)| (*q, i as u32))
-            .collect()
-    } else {
-        FxHashMap::default()
-    };
+    // Where each position is: this patch first (source 0), then the siblings.
+    let mut at: FxHashMap<[u32; 3], (u32, u32)> = FxHashMap::default();
+    if morphs {
+        let sources = std::iter::once(p).chain(siblings.iter().copied());
+        for (k, s) in sources.enumerate() {
+            for (i, q) in s.positions.iter().enumerate() {
+                at.entry(*q).or_insert((k as u32, i as u32));
+            }
+        }
+    }
     for (i, q) in p.positions.iter().enumerate() {
         let position = local(q);
-        let (n, c) = (normal(i), color(i));
+        let (n, c) = attributes(p, i);
         let mut v = GpuVertex {
             position,
             target: position,
@@ -138,9 +144,9 @@ pub fn gpu_vertices(p: &PatchData, quant_step: f64, out: &mut Vec<GpuVertex>) {
         if morphs && p.morph_targets[i] != *q {
             let t = &p.morph_targets[i];
             v.target = local(t);
-            if let Some(&j) = at.get(t) {
-                v.target_normal = normal(j as usize);
-                v.target_color = color(j as usize);
+            if let Some(&(k, j)) = at.get(t) {
+                let s = if k == 0 { p } else { siblings[k as usize - 1] };
+                (v.target_normal, v.target_color) = attributes(s, j as usize);
             }
         }
         out.push(v);
@@ -488,6 +494,19 @@ impl GpuCache {
         patch: &PatchData,
         quant_step: f64,
     ) -> Result<u64, StoreError> {
+        self.upload_in_group(device, queue, (model, node), (patch, &[]), quant_step)
+    }
+
+    /// [`GpuCache::upload_for`] with the other patches of the node's residency group at
+    /// hand (for its morph targets' attributes: [`gpu_vertices`]).
+    pub fn upload_in_group(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        (model, node): (u32, u32),
+        (patch, siblings): (&PatchData, &[&PatchData]),
+        quant_step: f64,
+    ) -> Result<u64, StoreError> {
         let key = slot_key(model, node);
         if self.slots.contains_key(&key) {
             return Ok(0);
@@ -514,7 +533,7 @@ impl GpuCache {
             .and_then(|l| l.get(node as usize))
             .copied()
             .unwrap_or(0);
-        gpu_vertices(patch, quant_step, &mut verts);
+        gpu_vertices(patch, siblings, quant_step, &mut verts);
         self.vertices
             .write(queue, vertices.start, bytemuck::cast_slice(&verts));
         self.scratch = verts;
@@ -594,12 +613,19 @@ impl ResidentStore for GpuStore<'_> {
         self.cache.has_room(nv, ni)
     }
     fn upload(&mut self, node: u32, patch: &PatchData) -> Result<u64, StoreError> {
-        self.cache.upload_for(
+        self.upload_in_group(node, patch, &[])
+    }
+    fn upload_in_group(
+        &mut self,
+        node: u32,
+        patch: &PatchData,
+        siblings: &[&PatchData],
+    ) -> Result<u64, StoreError> {
+        self.cache.upload_in_group(
             self.device,
             self.queue,
-            self.model,
-            node,
-            patch,
+            (self.model, node),
+            (patch, siblings),
             self.quant_step,
         )
     }
@@ -620,4 +646,76 @@ impl ResidentStore for GpuStore<'_> {
 /// GPU bytes `p` takes once uploaded.
 pub fn patch_gpu_bytes(p: &PatchData) -> u64 {
     p.positions.len() as u64 * VERTEX_BYTES + p.indices.len() as u64 * INDEX_BYTES
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn decode(e: [i16; 2]) -> [f32; 3] {
+        // The shader's oct_decode.
+        let (x, y) = (f32::from(e[0]) / 32767.0, f32::from(e[1]) / 32767.0);
+        let z = 1.0 - x.abs() - y.abs();
+        let t = (-z).max(0.0);
+        let (x, y) = (
+            x - if x < 0.0 { -t } else { t },
+            y - if y < 0.0 { -t } else { t },
+        );
+        let l = (x * x + y * y + z * z).sqrt();
+        [x / l, y / l, z / l]
+    }
+
+    #[test]
+    fn octahedral_normals_round_trip() {
+        for n in [
+            [0.0, 0.0, 1.0],
+            [0.0, 0.0, -1.0],
+            [0.6, -0.8, 0.0],
+            [-0.48, 0.6, -0.64],
+            [0.577, 0.577, 0.577],
+        ] {
+            let l = f32::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+            let n = [n[0] / l, n[1] / l, n[2] / l];
+            let d = decode(oct_snorm16(n));
+            let dot = d[0] * n[0] + d[1] * n[1] + d[2] * n[2];
+            assert!(dot > 0.999_99, "{n:?} -> {d:?}");
+        }
+    }
+
+    /// A vertex moving onto a survivor takes the survivor's normal and colour as its
+    /// target's, from its own patch or from a sibling; one that stays keeps its own.
+    #[test]
+    fn targets_take_the_survivors_attributes() {
+        let a = PatchData {
+            positions: vec![[0, 0, 0], [4, 0, 0], [8, 0, 0]],
+            normals: vec![[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]],
+            colors: vec![[10, 0, 0, 255], [20, 0, 0, 255], [30, 0, 0, 255]],
+            morph_targets: vec![[0, 0, 0], [0, 0, 0], [16, 0, 0]],
+            indices: vec![0, 1, 2],
+            ..Default::default()
+        };
+        let b = PatchData {
+            positions: vec![[16, 0, 0]],
+            normals: vec![[0.0, -1.0, 0.0]],
+            colors: vec![[40, 0, 0, 255]],
+            morph_targets: vec![[16, 0, 0]],
+            ..Default::default()
+        };
+        let mut out = Vec::new();
+        gpu_vertices(&a, &[&b], 0.5, &mut out);
+        assert_eq!(out[0].target, out[0].position);
+        assert_eq!(out[0].target_normal, out[0].normal);
+        // Onto a survivor of the same patch.
+        assert_eq!(out[1].target, [0.0, 0.0, 0.0]);
+        assert_eq!(out[1].target_normal, out[0].normal);
+        assert_eq!(out[1].target_color, [10, 0, 0, 255]);
+        // Onto a survivor of the sibling.
+        assert_eq!(out[2].target, [8.0, 0.0, 0.0]);
+        assert_eq!(out[2].target_normal, oct_snorm16([0.0, -1.0, 0.0]));
+        assert_eq!(out[2].target_color, [40, 0, 0, 255]);
+        // Without the sibling it keeps its own.
+        gpu_vertices(&a, &[], 0.5, &mut out);
+        assert_eq!(out[2].target_normal, out[2].normal);
+        assert_eq!(out[2].target_color, [30, 0, 0, 255]);
+    }
 }

@@ -351,7 +351,7 @@ impl Residency {
         store: &mut R,
         frame: u64,
         (node, g, pin): (u32, u32, bool),
-        patch: &PatchData,
+        (patch, siblings): (&PatchData, &[&PatchData]),
         prefer: &impl Fn(u32) -> bool,
     ) -> Result<u64, StoreError> {
         if self.resident[node as usize] {
@@ -367,7 +367,7 @@ impl Residency {
             }
         }
         let bytes = loop {
-            match store.upload(node, patch) {
+            match store.upload_in_group(node, patch, siblings) {
                 Ok(b) => break b,
                 Err(StoreError::Full) => {
                     if !self.evict_one(groups, store, frame, prefer) {
@@ -744,9 +744,14 @@ impl Scheduler {
             match a {
                 Answer::Loaded { node, patch } => {
                     let key = (node, self.groups.of(node), true);
-                    let r = self
-                        .res
-                        .upload(&self.groups, store, self.frame, key, &patch, &|_| false);
+                    let r = self.res.upload(
+                        &self.groups,
+                        store,
+                        self.frame,
+                        key,
+                        (&patch, &[]),
+                        &|_| false,
+                    );
                     if let Err(e) = r {
                         tracing::warn!(node, error = ?e, "root patch skipped");
                         self.failed.insert(node);
@@ -1080,7 +1085,11 @@ impl Scheduler {
                 let mut whole = true;
                 for (m, p) in &patches {
                     let key = (*m, g, nv.nodes()[*m as usize].parent == NO_NODE);
-                    match self.res.upload(groups, store, frame, key, p, &unloadable) {
+                    let what = (p.as_ref(), refs.as_slice());
+                    match self
+                        .res
+                        .upload(groups, store, frame, key, what, &unloadable)
+                    {
                         Ok(b) => {
                             budget -= b.min(budget);
                             stats.bytes_uploaded += b;
@@ -1221,6 +1230,16 @@ impl Scheduler {
                 let answers = source
                     .read_now(&todo[next..end])
                     .ok_or(CompleteError::NoBlockingReads)?;
+                // The batch's patches by group: a member's siblings for its upload.
+                let mut by_group: FxHashMap<u32, Vec<Arc<PatchData>>> = FxHashMap::default();
+                for a in &answers {
+                    if let Answer::Loaded { node, patch } = a {
+                        by_group
+                            .entry(groups.of(*node))
+                            .or_default()
+                            .push(patch.clone());
+                    }
+                }
                 for (i, a) in answers.into_iter().enumerate() {
                     match a {
                         Answer::Loaded { node, patch } => {
@@ -1230,10 +1249,10 @@ impl Scheduler {
                             let g = groups.of(node);
                             let root = self.nv.nodes()[node as usize].parent == NO_NODE;
                             let key = (node, g, root);
-                            match self
-                                .res
-                                .upload(groups, store, frame, key, &patch, &|_| false)
-                            {
+                            let siblings: Vec<&PatchData> =
+                                by_group[&g].iter().map(|p| p.as_ref()).collect();
+                            let what = (patch.as_ref(), siblings.as_slice());
+                            match self.res.upload(groups, store, frame, key, what, &|_| false) {
                                 Ok(b) => {
                                     stats.bytes_uploaded += b;
                                     stats.patches_uploaded += 1;

@@ -39,6 +39,19 @@ pub trait ResidentStore {
     }
     /// Makes `node`'s patch resident; returns the bytes it takes.
     fn upload(&mut self, node: u32, patch: &PatchData) -> Result<u64, StoreError>;
+    /// [`ResidentStore::upload`] of a member of a residency group with other patches of
+    /// the group at hand (`siblings`, those loaded with it; may be incomplete): a store
+    /// that draws morph targets takes a target's attributes from the sibling holding
+    /// the surviving vertex when the patch itself does not. Default: `upload`.
+    fn upload_in_group(
+        &mut self,
+        node: u32,
+        patch: &PatchData,
+        siblings: &[&PatchData],
+    ) -> Result<u64, StoreError> {
+        let _ = siblings;
+        self.upload(node, patch)
+    }
     /// Frees `node`'s patch (nothing if not resident).
     fn evict(&mut self, node: u32);
     /// Bytes held by resident patches.
