@@ -1218,6 +1218,9 @@ impl Scheduler {
             }
         }
         stats.cache_misses = todo.len();
+        // A group's members read together (one batch unless it is larger): each upload
+        // has its siblings at hand for the morph targets' attributes.
+        todo.sort_by_key(|&n| groups.of(n));
         let mut drawn = vec![false; self.sel.draw.len()];
         let mut cleared = false;
         let (mut unavailable, mut recovered) = (Vec::new(), Vec::new());
