@@ -104,10 +104,14 @@ fn covered(img: &Image, bg: [u8; 3]) -> usize {
 fn no_pinholes_at_any_tolerance_complete_frames() {
     let b = build(None, 60_000, &small_options());
     let cams = outside_cameras(b.model.header().bounding_sphere, 320, 240, 6);
+    // Geomorphing is on (the default): the frames must morph, or they do not test it.
+    let (mut morphed, mut top) = (0, 0.0f32);
     for tol in [0.5f32, 1.0, 2.0, 4.0, 8.0, 32.0] {
         let mut v = complete_viewer(&b.model, tol);
         for (i, cam) in cams.iter().enumerate() {
             let s = v.render(cam).expect("render");
+            morphed += usize::from(s.morph_max > 0.0);
+            top = top.max(s.morph_max);
             let img = v.read_image().expect("read");
             let holes = enclosed_background_pixels(&img, [255, 0, 255]);
             assert_eq!(
@@ -120,6 +124,54 @@ fn no_pinholes_at_any_tolerance_complete_frames() {
             );
         }
     }
+    assert!(
+        morphed >= cams.len() * 3 && top > 0.5,
+        "{morphed} of {} frames morph, largest ratio {top}",
+        cams.len() * 6
+    );
+}
+
+/// Slow reads (the pager's slow-read hook): groups arrive after the view wanted them and
+/// enter at ratio 1 (their parent's shape), then blend down; frames stay crack-free
+/// meanwhile, and the view converges to the complete frame's cut.
+#[test]
+fn late_groups_blend_in_from_their_parents_shape() {
+    let b = build(None, 60_000, &small_options());
+    let cam = &outside_cameras(b.model.header().bounding_sphere, 320, 240, 1)[0];
+    let mut v = Viewer::new(
+        b.model.clone(),
+        ViewerOptions {
+            read_delay: Some(Duration::from_millis(15)),
+            background: MAGENTA,
+            ..Default::default()
+        },
+    )
+    .expect("viewer");
+    let mut reference = complete_viewer(&b.model, 1.0);
+    let full = reference.render(cam).expect("render");
+    let (mut entered_at_1, mut blending_frames) = (0, 0);
+    let start = Instant::now();
+    let mut last = None;
+    while start.elapsed() < Duration::from_secs(30) {
+        let s = v.render(cam).expect("render");
+        if s.morph_blending > 0 {
+            blending_frames += 1;
+            entered_at_1 += usize::from(s.morph_max == 1.0);
+        }
+        let img = v.read_image().expect("read");
+        let holes = enclosed_background_pixels(&img, [255, 0, 255]);
+        assert_eq!(holes, 0, "{holes} pinhole pixels while blending ({s:?})");
+        let done = s.pending_loads == 0 && s.morph_blending == 0 && s.triangles == full.triangles;
+        last = Some(s);
+        if done {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let last = last.expect("frames");
+    assert_eq!(last.triangles, full.triangles, "did not converge: {last:?}");
+    assert!(blending_frames > 5, "{blending_frames} frames blended");
+    assert!(entered_at_1 > 0, "no group entered at its parent's shape");
 }
 
 /// Progressive frames with a tiny upload budget draw cuts mixing resident and missing
