@@ -73,6 +73,20 @@ pub fn verify_index<S: ByteSource + ?Sized>(index: &ModelIndex, source: &S) -> V
     let mut max_error = 0f32;
     let mut max_level = 0u8;
     let mut diamonds: std::collections::HashMap<u32, usize> = Default::default();
+    if h.reserved.iter().any(|&v| v != 0) {
+        r.problem("header: reserved fields are not zero".into());
+    }
+    if h.leaf_triangles_max == 0 {
+        r.problem("header: leaf_triangles_max is 0".into());
+    }
+    let bounds = Bounds {
+        step,
+        eps,
+        grid_max,
+        origin: h.cube_origin,
+        sphere: h.bounding_sphere,
+    };
+    let mut leaf_triangles = 0u64;
 
     for (i, n) in nodes.iter().enumerate() {
         r.checked_nodes += 1;
@@ -108,6 +122,12 @@ pub fn verify_index<S: ByteSource + ?Sized>(index: &ModelIndex, source: &S) -> V
         }
         if n.root >= 6 {
             r.problem(format!("node {i}: root id {} >= 6", n.root));
+        }
+        if n.reserved.iter().any(|&v| v != 0) {
+            r.problem(format!("node {i}: reserved fields are not zero"));
+        }
+        if n.flags & NODE_FLAG_LEAF != 0 {
+            leaf_triangles += u64::from(n.triangle_count);
         }
 
         // Links.
@@ -160,11 +180,17 @@ pub fn verify_index<S: ByteSource + ?Sized>(index: &ModelIndex, source: &S) -> V
 
         // The patch itself.
         match index.read_patch(source, i) {
-            Ok(patch) => check_patch(&mut r, i, n, &patch, step, eps, grid_max),
+            Ok(patch) => check_patch(&mut r, i, n, &patch, &bounds),
             Err(e) => r.problem(format!("node {i}: {e}")),
         }
     }
 
+    if leaf_triangles > h.input_triangles {
+        r.problem(format!(
+            "header input_triangles {} but the leaves hold {leaf_triangles}",
+            h.input_triangles
+        ));
+    }
     if h.max_error != max_error {
         r.problem(format!(
             "header max_error {} but the largest node error is {max_error}",
@@ -223,20 +249,31 @@ fn check_child(
     }
 }
 
-fn check_patch(
-    r: &mut VerifyReport,
-    i: usize,
-    n: &NodeRecord,
-    patch: &PatchData,
+/// What a patch's vertices must lie within.
+struct Bounds {
     step: f64,
     eps: f64,
     grid_max: u64,
-) {
+    /// The header's cube origin and bounding sphere (model coordinates).
+    origin: [f64; 3],
+    sphere: [f64; 4],
+}
+
+fn check_patch(r: &mut VerifyReport, i: usize, n: &NodeRecord, patch: &PatchData, b: &Bounds) {
+    let (step, eps, grid_max) = (b.step, b.eps, b.grid_max);
     // Counts and index ranges are enforced by the decoder; positions and spheres here.
     let s = &n.tight_sphere;
     let mut outside_grid = 0usize;
     let mut outside_sphere = 0usize;
+    // The header's sphere bounds the input, whose grid points are within half a cell
+    // diagonal (< one step) of it.
+    let mut outside_model = 0usize;
     for p in &patch.positions {
+        let m: [f64; 3] = std::array::from_fn(|k| b.origin[k] + p[k] as f64 * step - b.sphere[k]);
+        let dm = (m[0] * m[0] + m[1] * m[1] + m[2] * m[2]).sqrt();
+        if !(dm <= b.sphere[3] + step + eps) {
+            outside_model += 1;
+        }
         if p.iter()
             .zip(&n.quant_min)
             .any(|(&v, &m)| (v as u64) > grid_max || v < m)
@@ -261,6 +298,41 @@ fn check_patch(
         r.problem(format!(
             "node {i}: {outside_sphere} vertices outside the tight sphere"
         ));
+    }
+    if outside_model > 0 {
+        r.problem(format!(
+            "node {i}: {outside_model} vertices outside the header's bounding sphere"
+        ));
+    }
+    // The normal cone holds the geometric normal of every triangle (the builder's
+    // definition, from the grid positions; the slack covers the axis stored in f32).
+    let c = n.normal_cone;
+    if c[3] > -1.0 && c.iter().all(|v| v.is_finite()) {
+        let axis = [c[0] as f64, c[1] as f64, c[2] as f64];
+        let min_cos = c[3] as f64 - 1e-4;
+        let q = |v: u32| patch.positions.get(v as usize).map(|p| p.map(|x| x as f64));
+        let mut outside_cone = 0usize;
+        for t in patch.indices.chunks_exact(3) {
+            let (Some(a), Some(b), Some(d)) = (q(t[0]), q(t[1]), q(t[2])) else {
+                continue;
+            };
+            let u = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+            let v = [d[0] - a[0], d[1] - a[1], d[2] - a[2]];
+            let f = [
+                u[1] * v[2] - u[2] * v[1],
+                u[2] * v[0] - u[0] * v[2],
+                u[0] * v[1] - u[1] * v[0],
+            ];
+            let len = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
+            if len > 0.0 && (f[0] * axis[0] + f[1] * axis[1] + f[2] * axis[2]) / len < min_cos {
+                outside_cone += 1;
+            }
+        }
+        if outside_cone > 0 {
+            r.problem(format!(
+                "node {i}: {outside_cone} triangles face outside the normal cone"
+            ));
+        }
     }
     for t in &patch.morph_targets {
         if t.iter().any(|&v| v as u64 > grid_max) {
