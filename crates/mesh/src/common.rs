@@ -86,6 +86,17 @@ pub(crate) fn log_skips(path: &Path, report: &ImportReport) {
             report.ignored_statements
         );
     }
+    if report.trailing_bytes_ignored > 0 {
+        tracing::warn!(
+            "{p}: ignoring {} bytes after the last element the header declares (more faces than declared, or garbage)",
+            report.trailing_bytes_ignored
+        );
+    }
+    if report.unterminated_last_line {
+        tracing::warn!(
+            "{p}: the file does not end with a newline; if it was cut short, its last number was read incomplete"
+        );
+    }
     if report.polygons_triangulated > 0 {
         tracing::debug!(
             "{p}: fan-triangulated {} polygons",

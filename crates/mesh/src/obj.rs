@@ -60,9 +60,14 @@ pub(crate) fn read_obj_from<R: Read>(
     let mut reader = ObjReader::new(path, attributes, scan.uses_vt || scan.uses_vn);
     let mut src = Source::new(open()?);
     let mut line = Vec::new();
+    let mut last_statement = false;
     while reader.next_line(&mut src, &mut line)? {
         reader.statement(&line, visitor)?;
+        last_statement = !line.trim_ascii().is_empty();
     }
+    // A last statement the file ends inside may have been cut short ("f 55 64 6" of
+    // "f 55 64 65"): it reads as valid, so say so.
+    reader.report.unterminated_last_line = src.unterminated && last_statement;
     finish_report(path, reader.report)
 }
 

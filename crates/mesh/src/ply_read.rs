@@ -156,6 +156,16 @@ pub(crate) fn read_ply_from<R: Read>(
         Format::BinaryLe => read_body::<Le, R>(&mut cx, &header, &plans, visitor, &mut report)?,
         Format::BinaryBe => read_body::<Be, R>(&mut cx, &header, &plans, visitor, &mut report)?,
     }
+    let tail = cx
+        .src
+        .drain()
+        .map_err(|e| cx.err(e, || "the end of the file".into()))?;
+    if cx.ascii {
+        report.trailing_bytes_ignored = tail.non_space;
+        report.unterminated_last_line = tail.non_space == 0 && !tail.ends_in_newline;
+    } else {
+        report.trailing_bytes_ignored = tail.bytes;
+    }
     finish_report(path, report)
 }
 

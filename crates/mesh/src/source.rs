@@ -43,6 +43,21 @@ pub(crate) struct Source<R> {
     base: u64,
     /// Newlines consumed so far by the text helpers (for "line N" messages).
     pub(crate) line: u64,
+    /// The last byte consumed before the window last slid (see [`Source::last_byte`]).
+    prev: Option<u8>,
+    /// [`Source::line_into`] returned a last line that the file ends inside (no
+    /// newline after it): a file cut short there reads as a shorter, valid line.
+    pub(crate) unterminated: bool,
+}
+
+/// What [`Source::drain`] found after the last byte a reader consumed.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) struct Tail {
+    pub bytes: u64,
+    /// Bytes other than ASCII whitespace.
+    pub non_space: u64,
+    /// The file's last byte is a newline.
+    pub ends_in_newline: bool,
 }
 
 impl<R: Read> Source<R> {
@@ -54,7 +69,34 @@ impl<R: Read> Source<R> {
             end: 0,
             base: 0,
             line: 1,
+            prev: None,
+            unterminated: false,
         }
+    }
+
+    /// The last byte consumed, if any.
+    fn last_byte(&self) -> Option<u8> {
+        if self.pos > 0 {
+            Some(self.buf[self.pos - 1])
+        } else {
+            self.prev
+        }
+    }
+
+    /// Consumes the rest of the file, counting it.
+    pub(crate) fn drain(&mut self) -> Result<Tail, ReadErr> {
+        let mut tail = Tail {
+            ends_in_newline: self.last_byte() == Some(b'\n'),
+            ..Tail::default()
+        };
+        while self.ensure(1)? {
+            let window = &self.buf[self.pos..self.end];
+            tail.bytes += window.len() as u64;
+            tail.non_space += window.iter().filter(|b| !b.is_ascii_whitespace()).count() as u64;
+            tail.ends_in_newline = window.last() == Some(&b'\n');
+            self.pos = self.end;
+        }
+        Ok(tail)
     }
 
     /// Absolute offset of the next unread byte.
@@ -74,6 +116,9 @@ impl<R: Read> Source<R> {
     #[cold]
     fn refill(&mut self, n: usize) -> Result<bool, ReadErr> {
         // Slide the unread tail to the front, grow if one request exceeds the window.
+        if self.pos > 0 {
+            self.prev = Some(self.buf[self.pos - 1]);
+        }
         self.buf.copy_within(self.pos..self.end, 0);
         self.base += self.pos as u64;
         self.end -= self.pos;
@@ -139,6 +184,7 @@ impl<R: Read> Source<R> {
                 if out.last() == Some(&b'\r') {
                     out.pop();
                 }
+                self.unterminated |= !out.is_empty();
                 return Ok(!out.is_empty());
             }
             let window = &self.buf[self.pos..self.end];

@@ -68,4 +68,10 @@ pub struct ImportReport {
     pub short_faces_skipped: u64,
     /// Unknown OBJ statements or PLY elements that were ignored.
     pub ignored_statements: u64,
+    /// Bytes after the last element a PLY header declares (ASCII: other than
+    /// whitespace), ignored: more faces than declared, or garbage.
+    pub trailing_bytes_ignored: u64,
+    /// The text file ends inside its last line (no newline after it): if it was cut
+    /// short there, that line's last number was read incomplete.
+    pub unterminated_last_line: bool,
 }

@@ -240,3 +240,18 @@ fn utf8_bom_before_the_first_line_is_skipped() {
     let (r, _) = read_ok("bom.stl", &b);
     assert_eq!(r.triangles, 1);
 }
+
+/// Issue 14, failure 7: a file cut inside its last number ("f 1 2 3" of "f 1 2 34")
+/// reads as valid; the report says the file ends inside its last statement. A trailing
+/// comment without a newline is not reported.
+#[test]
+fn a_cut_last_statement_is_reported() {
+    let text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
+    let (r, _) = read_ok("whole.obj", text.as_bytes());
+    assert!(!r.unterminated_last_line);
+    let (r, _) = read_ok("cut.obj", text.trim_end().as_bytes());
+    assert!(r.unterminated_last_line);
+    let commented = format!("{text}# end");
+    let (r, _) = read_ok("comment.obj", commented.as_bytes());
+    assert!(!r.unterminated_last_line);
+}

@@ -696,3 +696,36 @@ fn binary_parse_speed() {
         opts.face_count as f64 / best / 1e6
     );
 }
+
+/// Issue 14, failure 7: faces or garbage after the declared elements were ignored
+/// silently, and a file cut inside its last number read as valid. Both are now in the
+/// report (and warned about); complete files report neither.
+#[test]
+fn trailing_data_and_a_cut_last_line_are_reported() {
+    let (r, _) = read_ok("quad.ply", ASCII_QUAD.as_bytes());
+    assert_eq!(
+        (r.trailing_bytes_ignored, r.unterminated_last_line),
+        (0, false)
+    );
+    let extra = format!("{ASCII_QUAD}3 0 1 2\n");
+    let (r, _) = read_ok("extra.ply", extra.as_bytes());
+    assert_eq!(r.trailing_bytes_ignored, 4, "{r:?}");
+    let cut = ASCII_QUAD.trim_end();
+    let (r, _) = read_ok("cut.ply", cut.as_bytes());
+    assert!(
+        r.unterminated_last_line && r.trailing_bytes_ignored == 0,
+        "{r:?}"
+    );
+    let mut body = le_rgba_body();
+    body.extend_from_slice(&[1, 2, 3]);
+    let (r, _) = read_ok(
+        "extra-le.ply",
+        &binary("binary_little_endian", LE_RGBA_HEADER, &body),
+    );
+    assert_eq!(r.trailing_bytes_ignored, 3, "{r:?}");
+    let (r, _) = read_ok(
+        "le.ply",
+        &binary("binary_little_endian", LE_RGBA_HEADER, &le_rgba_body()),
+    );
+    assert_eq!(r.trailing_bytes_ignored, 0, "{r:?}");
+}
