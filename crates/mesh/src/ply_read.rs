@@ -136,18 +136,20 @@ pub(crate) fn read_ply_from<R: Read>(
     };
     let header = parse_header(&mut cx)?;
     cx.ascii = header.format == Format::Ascii;
-    let (vertex_el, face_el) = find_mesh_elements(&cx, &header)?;
+    let (vertex_el, face_el, strips) = find_mesh_elements(&cx, &header)?;
     let vplan = VertexPlan::new(&cx, &header.elements[vertex_el])?;
     let fplan = FacePlan::new(&cx, &header.elements[face_el])?;
     visitor.header(&MeshHeader {
         attributes: vplan.attributes,
         vertex_count: Some(header.elements[vertex_el].count),
-        face_count: Some(header.elements[face_el].count),
+        // A strip holds any number of triangles.
+        face_count: (!strips).then_some(header.elements[face_el].count),
     })?;
     let mut report = ImportReport::default();
     let plans = Plans {
         vertex_el,
         face_el,
+        strips,
         vplan,
         fplan,
     };
@@ -296,11 +298,13 @@ fn parse_property(words: &[&str]) -> Result<Property, String> {
     }
 }
 
-/// Indices of the `vertex` and `face` elements, checking their presence and order.
+/// Indices of the `vertex` and `face` elements (or, without faces, `tristrips`: the
+/// triangle strips some scanners' tools write, e.g. the Stanford Igea scan), checking
+/// their presence and order; `true` when the faces are strips.
 fn find_mesh_elements<R: Read>(
     cx: &Ctx<'_, R>,
     header: &Header,
-) -> Result<(usize, usize), MeshError> {
+) -> Result<(usize, usize, bool), MeshError> {
     let find = |name: &str| -> Result<Option<usize>, MeshError> {
         let mut found = header
             .elements
@@ -319,13 +323,17 @@ fn find_mesh_elements<R: Read>(
     };
     let vertex = find("vertex")?
         .ok_or_else(|| MeshError::malformed(cx.path, "header", "no 'vertex' element"))?;
-    let face = find("face")?.ok_or_else(|| {
-        MeshError::malformed(
-            cx.path,
-            "header",
-            "no 'face' element (point clouds are not meshes)",
-        )
-    })?;
+    let (face, strips) = match (find("face")?, find("tristrips")?) {
+        (Some(f), _) => (f, false),
+        (None, Some(t)) => (t, true),
+        (None, None) => {
+            return Err(MeshError::malformed(
+                cx.path,
+                "header",
+                "no 'face' or 'tristrips' element (point clouds are not meshes)",
+            ))
+        }
+    };
     if face < vertex && header.elements[face].count > 0 {
         return Err(MeshError::malformed(
             cx.path,
@@ -338,7 +346,7 @@ fn find_mesh_elements<R: Read>(
             path: cx.path.to_path_buf(),
         });
     }
-    Ok((vertex, face))
+    Ok((vertex, face, strips))
 }
 
 // ---------------------------------------------------------------------------------------
@@ -506,6 +514,8 @@ impl FacePlan {
 struct Plans {
     vertex_el: usize,
     face_el: usize,
+    /// The face element is `tristrips`.
+    strips: bool,
     vplan: VertexPlan,
     fplan: FacePlan,
 }
@@ -629,6 +639,8 @@ fn read_body<D: Decoder, R: Read>(
         if i == plans.vertex_el {
             read_vertices::<D, R>(cx, el, &plans.vplan, visitor)?;
             report.vertices = el.count;
+        } else if i == plans.face_el && plans.strips {
+            read_strips::<D, R>(cx, el, &plans.fplan, vertex_count, visitor, report)?;
         } else if i == plans.face_el {
             read_faces::<D, R>(cx, el, &plans.fplan, vertex_count, visitor, report)?;
         } else {
@@ -764,6 +776,60 @@ fn read_faces<D: Decoder, R: Read>(
             Err(e) => return Err(cx.err(e, || format!("face {i} of {}", el.count))),
         }
         emitter.emit(&corners, visitor, report)?;
+    }
+    Ok(())
+}
+
+/// Triangle strips: each entry a list of vertex indices where -1 restarts the strip;
+/// triangle k of a strip is (v[k], v[k+1], v[k+2]), its winding flipped for odd k. The
+/// zero-area triangles strips use to turn corners are dropped without a count (they are
+/// how strips are made, not defects of the mesh).
+fn read_strips<D: Decoder, R: Read>(
+    cx: &mut Ctx<'_, R>,
+    el: &Element,
+    plan: &FacePlan,
+    vertex_count: u64,
+    visitor: &mut dyn MeshVisitor,
+    report: &mut ImportReport,
+) -> Result<(), MeshError> {
+    for i in 0..el.count {
+        let mut run: [u32; 3] = [0; 3];
+        let mut len = 0usize;
+        for (k, &kind) in plan.props.iter().enumerate() {
+            let what = || format!("triangle strip {i} of {}", el.count);
+            match kind {
+                PropKind::List { count, item } if k == plan.indices => {
+                    let n = list_len::<D, R>(&mut cx.src, count).map_err(|e| cx.err(e, what))?;
+                    for _ in 0..n {
+                        let x = D::value(&mut cx.src, item).map_err(|e| cx.err(e, what))?;
+                        if x == -1.0 {
+                            len = 0;
+                            continue;
+                        }
+                        let v = match checked_index(x, vertex_count) {
+                            Ok(v) => v,
+                            Err(ReadErr::BadIndex(bad)) => {
+                                return Err(index_error(cx, i, bad, vertex_count))
+                            }
+                            Err(e) => return Err(cx.err(e, what)),
+                        };
+                        run = [run[1], run[2], v];
+                        len += 1;
+                        if len < 3 {
+                            continue;
+                        }
+                        let [a, b, c] = run;
+                        if a == b || b == c || a == c {
+                            continue;
+                        }
+                        let t = if len % 2 == 1 { [a, b, c] } else { [b, a, c] };
+                        visitor.triangle(t)?;
+                        report.triangles += 1;
+                    }
+                }
+                other => skip_prop::<D, R>(&mut cx.src, other).map_err(|e| cx.err(e, what))?,
+            }
+        }
     }
     Ok(())
 }

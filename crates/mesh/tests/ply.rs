@@ -729,3 +729,54 @@ fn trailing_data_and_a_cut_last_line_are_reported() {
     );
     assert_eq!(r.trailing_bytes_ignored, 0, "{r:?}");
 }
+
+/// Issue 14: a PLY of triangle strips (`element tristrips`, -1 restarting a strip, as
+/// the Stanford Igea scan ships) was refused as a point cloud; it reads as triangles
+/// with alternating winding, strip-turning degenerates dropped, in ASCII and binary.
+#[test]
+fn triangle_strips_read_as_triangles() {
+    let head = "element vertex 5\nproperty float x\nproperty float y\nproperty float z\n\
+                element tristrips 1\nproperty list int int vertex_indices\n";
+    let verts = "0 0 0\n1 0 0\n0 1 0\n1 1 0\n2 1 0\n";
+    let text = format!("ply\nformat ascii 1.0\n{head}end_header\n{verts}8 0 1 2 3 -1 1 3 4\n");
+    let (r, c) = read_ok("strips.ply", text.as_bytes());
+    // 0 1 2 3 -> (0,1,2), (2,1,3); restart; 1 3 4 -> (1,3,4).
+    assert_eq!(c.triangles, vec![[0, 1, 2], [2, 1, 3], [1, 3, 4]]);
+    assert_eq!(r.triangles, 3);
+    assert_eq!(c.headers[0].face_count, None);
+    // A turning degenerate (2 repeated) is dropped, the parity kept: triangle 3 of
+    // the strip is odd, so (2, 3, 4) is drawn as (3, 2, 4).
+    let text = format!("ply\nformat ascii 1.0\n{head}end_header\n{verts}6 0 1 2 2 3 4\n");
+    let (r, c) = read_ok("turn.ply", text.as_bytes());
+    assert_eq!(c.triangles, vec![[0, 1, 2], [3, 2, 4]]);
+    assert_eq!(r.degenerate_faces_skipped, 0);
+    // Binary little endian, the same strip.
+    let mut body = Vec::new();
+    for v in [
+        [0f32, 0., 0.],
+        [1., 0., 0.],
+        [0., 1., 0.],
+        [1., 1., 0.],
+        [2., 1., 0.],
+    ] {
+        for x in v {
+            body.extend_from_slice(&x.to_le_bytes());
+        }
+    }
+    body.extend_from_slice(&8i32.to_le_bytes());
+    for i in [0i32, 1, 2, 3, -1, 1, 3, 4] {
+        body.extend_from_slice(&i.to_le_bytes());
+    }
+    let (_, c) = read_ok(
+        "strips-le.ply",
+        &binary("binary_little_endian", head, &body),
+    );
+    assert_eq!(c.triangles, vec![[0, 1, 2], [2, 1, 3], [1, 3, 4]]);
+    // An index out of range is an error naming it.
+    let bad = format!("ply\nformat ascii 1.0\n{head}end_header\n{verts}3 0 1 9\n");
+    let e = read_err("bad-strip.ply", bad.as_bytes());
+    assert!(
+        matches!(e, MeshError::IndexOutOfRange { index: 9, .. }),
+        "{e}"
+    );
+}
