@@ -17,7 +17,7 @@ pub enum MeshError {
         source: std::io::Error,
     },
     /// The file extension is not one of `.ply`, `.obj`, `.stl` (or the content matches none).
-    #[error("{}: unknown mesh format (expected .ply, .obj or .stl)", path.display())]
+    #[error("{}: unknown mesh format (expected .ply, .obj or .stl, optionally .gz)", path.display())]
     UnknownFormat { path: PathBuf },
     /// The file ends before the data its header (or syntax) promises.
     #[error("{}: file is truncated: {detail}", path.display())]

@@ -124,3 +124,37 @@ proptest! {
         let _ = read_bytes(name, &bytes);
     }
 }
+
+fn gzip(bytes: &[u8]) -> Vec<u8> {
+    use std::io::Write;
+    let mut e = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
+    e.write_all(bytes).expect("gzip");
+    e.finish().expect("gzip")
+}
+
+/// Gzip-compressed inputs read as their plain bytes do, whatever the name (`.ply.gz`,
+/// or a compressed file named `.ply`); an unknown extension is read when the content
+/// says PLY; a corrupt or truncated gzip stream is an error naming the file.
+#[test]
+fn gzip_inputs_read_as_the_plain_ones() {
+    for (name, bytes) in samples().into_iter().take(4) {
+        let (plain, c) = read_ok(name, &bytes);
+        let z = gzip(&bytes);
+        for gz_name in [format!("{name}.gz"), name.to_string()] {
+            let (r, d) = read_ok(&gz_name, &z);
+            assert_eq!(r, plain, "{gz_name}");
+            assert_eq!(d.triangles, c.triangles, "{gz_name}");
+            assert_eq!(d.vertices, c.vertices, "{gz_name}");
+        }
+        let cut = &z[..z.len() / 2];
+        let e = read_err(&format!("{name}.gz"), cut);
+        assert!(!e.to_string().is_empty());
+    }
+    read_ok("scan.data", PLY_ASCII);
+    read_ok("scan.data.gz", &gzip(PLY_ASCII));
+    let e = read_err("scan.data", OBJ);
+    assert!(
+        matches!(e, tessera_mesh::MeshError::UnknownFormat { .. }),
+        "{e}"
+    );
+}
