@@ -942,3 +942,30 @@ fn interrupted_build_cleans_up() {
     }
     assert!(interrupted >= 2, "the builds finished before the signal");
 }
+
+/// Issue 14, failures 7 and 8: a warning (here: a face after the declared ones) reaches
+/// stderr as plain text when stderr is not a terminal (no ANSI colour codes), and the
+/// build still succeeds.
+#[test]
+fn warnings_are_plain_text_off_a_terminal() {
+    let dir = tempfile::tempdir().unwrap();
+    let ply = dir.path().join("extra.ply");
+    std::fs::write(
+        &ply,
+        "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n\
+         property float z\nelement face 1\nproperty list uchar int vertex_indices\n\
+         end_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n3 0 2 1\n",
+    )
+    .unwrap();
+    let out = dir.path().join("extra.tsr");
+    let (code, _, err) = run_tessera(args!["build", &ply, "-o", &out]);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        err.contains("ignoring 4 bytes after the last element"),
+        "{err}"
+    );
+    assert!(
+        !err.contains('\u{1b}'),
+        "colour codes in piped stderr: {err:?}"
+    );
+}
