@@ -300,8 +300,9 @@ impl Ctx<'_> {
             .iter()
             .map(|&n| parent_target(n, self.cfg.node_triangles))
             .sum();
-        let (mut simplified, err_grid) = diamond::simplify(&merged, &locks, target, &self.cfg);
+        let (raw, err_grid) = diamond::simplify(&merged, &locks, target, &self.cfg);
         lap.mark(Phase::Simplify);
+        let mut simplified = raw.clone();
         let fixed = diamond::repair(&merged.vertices, &merged.pid, &mut simplified);
         lap.mark(Phase::Repair);
         self.repaired.fetch_add(
@@ -309,7 +310,8 @@ impl Ctx<'_> {
             Ordering::Relaxed,
         );
         // 3. Morph destinations; the children are now complete and can be written.
-        let dest = diamond::morph_destinations(&merged, &simplified);
+        let dest = diamond::morph_destinations(&merged, &locks, &raw, &simplified);
+        drop(raw);
         lap.mark(Phase::Morph);
         let mut child_err = 0.0f64;
         let mut balls = Vec::new();
