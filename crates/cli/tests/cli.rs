@@ -371,10 +371,12 @@ fn build_rejects_bad_input_cleanly() {
             "empty.stl",
             Box::new(|p| std::fs::write(p, "").unwrap()),
         ),
-        ("unknown extension", "mesh.xyz", {
-            let b = sphere_bytes.clone();
-            Box::new(move |p| std::fs::write(p, &b).unwrap())
-        }),
+        // (A PLY under an unknown extension is read: its first bytes say PLY.)
+        (
+            "unknown extension",
+            "mesh.xyz",
+            Box::new(|p| std::fs::write(p, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap()),
+        ),
         ("missing file", "missing.ply", Box::new(|_| {})),
         (
             "a directory",
