@@ -24,15 +24,21 @@ fn converge(
     camera: &Camera,
     remote: Option<&RemoteModel>,
 ) -> Vec<u32> {
-    for _ in 0..4000 {
-        let s = sched.frame(camera, 0.0, pager, store);
+    for i in 0..4000 {
+        // Time advances (60 frames a second): late groups blend in over 0.25 s.
+        let s = sched.frame(camera, f64::from(i) / 60.0, pager, store);
         let mut grew = false;
         if let Some(r) = remote.filter(|_| s.index_wants > 0) {
             assert!(r.grow_index(), "asked for more index, but none came");
             sched.set_index(&r.latest_index().unwrap(), store);
             grew = true;
         }
-        if !grew && s.pending_loads == 0 && s.cache_misses == 0 && s.patches_uploaded == 0 {
+        if !grew
+            && s.pending_loads == 0
+            && s.cache_misses == 0
+            && s.patches_uploaded == 0
+            && s.morph_blending == 0
+        {
             let mut d = sched.draw().to_vec();
             d.sort_unstable();
             return d;
