@@ -61,7 +61,12 @@ fn settle(v: &mut Viewer, cam: &Camera, limit: Duration) -> FrameStats {
     loop {
         let s = frame(v, cam);
         let draw = v.scheduler().draw().to_vec();
-        let quiet = s.pending_loads == 0 && s.failed_patches == 0 && s.patches_uploaded == 0;
+        // No group blending in either (groups below one wait for it, the draw set
+        // unchanged meanwhile).
+        let quiet = s.pending_loads == 0
+            && s.failed_patches == 0
+            && s.patches_uploaded == 0
+            && s.morph_blending == 0;
         stable = if quiet && draw == last { stable + 1 } else { 0 };
         last = draw;
         if stable >= 3 {
