@@ -641,12 +641,6 @@ impl Viewer {
         self.opts.morph.enabled = enabled;
     }
 
-    /// Whether a model's arrival blend is still running (draw again even if nothing
-    /// else changed).
-    pub fn morphing(&self) -> bool {
-        self.models.iter().any(|m| m.scheduler.morphing())
-    }
-
     /// Changes the display options from the next frame on.
     pub fn set_shading(&mut self, shading: Shading) {
         self.opts.shading = shading;

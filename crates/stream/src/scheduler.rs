@@ -33,7 +33,7 @@ use tessera_select::{
 
 use crate::groups::{Groups, Readiness};
 use crate::lru::Lru;
-use crate::morph::{Morph, MorphOptions, MorphSummary};
+use crate::morph::{Morph, MorphOptions};
 use crate::source::{Answer, PatchSource};
 use crate::store::{ResidentStore, StoreError};
 
@@ -275,7 +275,6 @@ pub struct Scheduler {
     answers: Vec<Answer>,
     /// Morph ratios of the drawn nodes and the arrival blend.
     morph: Morph,
-    last_morph: MorphSummary,
     /// Groups the last selection found complete but kept waiting for an arrival blend.
     blocked: Vec<u32>,
 }
@@ -421,7 +420,6 @@ impl Scheduler {
             prev_camera: None,
             answers: Vec::new(),
             morph: Morph::new(n, g),
-            last_morph: MorphSummary::default(),
             blocked: Vec::new(),
         }
     }
@@ -685,12 +683,6 @@ impl Scheduler {
         self.opts.morph.enabled = enabled;
     }
 
-    /// Whether an arrival blend is still running (a front end that draws only on change
-    /// keeps drawing until it ends).
-    pub fn morphing(&self) -> bool {
-        self.last_morph.blending > 0
-    }
-
     /// Arrival blend duration in effect (0 when morphing is off).
     fn blend_s(&self) -> f64 {
         if self.opts.morph.enabled {
@@ -716,10 +708,6 @@ impl Scheduler {
         stats.morph_max = m.max;
         // Groups kept waiting for a blend count too: the view is still changing.
         stats.morph_blending = m.blending + self.blocked.len();
-        self.last_morph = MorphSummary {
-            blending: stats.morph_blending,
-            ..m
-        };
     }
 
     /// Nodes known to fail.
