@@ -16,7 +16,7 @@ const MAX_DIAMOND_MESSAGES: usize = 100;
 pub fn verify_diamonds(m: &Model) -> Vec<String> {
     let mut problems = Vec::new();
     let mut by_id: HashMap<u32, (DiamondKey, f32, usize)> = HashMap::new();
-    let mut by_key: HashMap<DiamondKey, (f32, [f32; 4], usize)> = HashMap::new();
+    let mut by_key: HashMap<DiamondKey, (f32, [f32; 4], usize, u32)> = HashMap::new();
     for (i, n) in m.nodes().iter().enumerate() {
         let Some(t) = Tet::from_path(n.root, n.level, n.tet_path) else {
             problems.push(format!(
@@ -38,13 +38,19 @@ pub fn verify_diamonds(m: &Model) -> Vec<String> {
         }
         if n.flags & NODE_FLAG_LEAF == 0 {
             match by_key.get(&key) {
-                Some((e, s, first)) => {
+                Some((e, s, first, id)) => {
                     if *e != n.error || *s != n.saturated_sphere {
                         problems.push(format!("node {i}: diamond mate of node {first} with another saturated error or sphere"));
                     }
+                    if *id != n.diamond {
+                        problems.push(format!(
+                            "node {i}: diamond mate of node {first} with another diamond id ({} and {id})",
+                            n.diamond
+                        ));
+                    }
                 }
                 None => {
-                    by_key.insert(key, (n.error, n.saturated_sphere, i));
+                    by_key.insert(key, (n.error, n.saturated_sphere, i, n.diamond));
                 }
             }
         }

@@ -148,11 +148,24 @@ pub fn verify_index<S: ByteSource + ?Sized>(index: &ModelIndex, source: &S) -> V
                 n.children[0]
             ));
         }
-        for &c in &n.children {
+        if n.level < 64 && n.tet_path >> n.level != 0 {
+            r.problem(format!(
+                "node {i}: tet_path {:#x} has bits beyond its level {}",
+                n.tet_path, n.level
+            ));
+        }
+        for (k, &c) in n.children.iter().enumerate() {
             let Some(child) = nodes.get(c as usize).filter(|_| c != NO_NODE) else {
                 continue;
             };
             check_child(&mut r, i, n, c as usize, child, eps);
+            // Child slot `k` is bisection choice `k` at depth `n.level` (records.rs).
+            if n.level < 63 && child.tet_path != n.tet_path | (k as u64) << n.level {
+                r.problem(format!(
+                    "node {}: tet_path {:#x} does not extend parent {i}'s {:#x} by choice {k}",
+                    c, child.tet_path, n.tet_path
+                ));
+            }
         }
         if let Some(p) = nodes.get(n.parent as usize).filter(|_| n.parent != NO_NODE) {
             if !p.children.contains(&(i as u32)) {
@@ -169,7 +182,20 @@ pub fn verify_index<S: ByteSource + ?Sized>(index: &ModelIndex, source: &S) -> V
                 "node {i}: tight sphere not inside its saturated sphere"
             ));
         }
+        let seen = diamonds.len();
         let first = *diamonds.entry(n.diamond).or_insert(i);
+        if first == i && n.diamond as usize != seen {
+            r.problem(format!(
+                "node {i}: diamond id {} out of order (ids are numbered by first \
+                 appearance: {seen} expected)",
+                n.diamond
+            ));
+        } else if first != i && n.flags & NODE_FLAG_LEAF != 0 {
+            r.problem(format!(
+                "node {i}: leaf shares diamond id {} with node {first} (leaves have their own)",
+                n.diamond
+            ));
+        }
         let d = &nodes[first];
         if d.error != n.error || d.saturated_sphere != n.saturated_sphere {
             r.problem(format!(

@@ -283,7 +283,11 @@ fn with_node(b: &[u8], edit: impl FnOnce(&mut [NodeRecord])) -> Vec<u8> {
 type Edit = (&'static str, Box<dyn Fn(&[u8]) -> Vec<u8>>);
 
 /// Edits that change nothing in a model of roots only.
-const NEEDS_TREE: [&str; 2] = ["parent cut", "children of a root dropped"];
+const NEEDS_TREE: [&str; 3] = [
+    "parent cut",
+    "children of a root dropped",
+    "tet path changed",
+];
 
 /// Corruptions a reader or `verify` must catch: header fields and node records changed
 /// behind valid checksums.
@@ -291,6 +295,15 @@ fn must_catch() -> Vec<Edit> {
     let h = |name, f: fn(&mut Header)| -> Edit { (name, Box::new(move |b| with_header(b, f))) };
     let n = |name, f: fn(&mut [NodeRecord])| -> Edit { (name, Box::new(move |b| with_node(b, f))) };
     vec![
+        // Diamond ids are numbered in order of first appearance (docs/format.md).
+        n("diamond id 999", |v| v[1].diamond = 999),
+        n("diamond id max", |v| v[2].diamond = u32::MAX),
+        // The deepest node's first bisection choice flipped: it no longer extends its
+        // parent's path.
+        n("tet path changed", |v| {
+            let i = v.len() - 1;
+            v[i].tet_path ^= 1;
+        }),
         h("sphere radius inf", |h| {
             h.bounding_sphere[3] = f64::INFINITY
         }),
@@ -381,12 +394,6 @@ fn may_miss() -> Vec<Edit> {
     vec![
         h("input triangles + 1", |h| h.input_triangles += 1),
         h("input triangles 2^62", |h| h.input_triangles = 1 << 62),
-        n("diamond id 999", |v| v[1].diamond = 999),
-        n("diamond id max", |v| v[2].diamond = u32::MAX),
-        n("tet path changed", |v| {
-            let i = v.len() - 1;
-            v[i].tet_path ^= 1;
-        }),
         n("reserved fields", |v| v[0].reserved = [1, 2, 3]),
     ]
 }

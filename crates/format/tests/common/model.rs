@@ -89,7 +89,7 @@ impl Fixture {
             n.triangle_count = p.triangle_count() as u32;
             n.children = [NO_NODE; 2];
             n.parent = NO_NODE;
-            n.diamond = i as u32 + 100;
+            n.diamond = i as u32; // numbered by first appearance (docs/format.md)
             n.root = if i == 1 { 1 } else { 0 };
             n.flags = NODE_FLAG_LEAF;
             n.tight_sphere = tight_sphere(p);
