@@ -65,6 +65,36 @@ impl PolygonEmitter {
     }
 }
 
+/// Distinct names [`ImportReport::ignored_by_name`] keeps; later ones go under `other names`
+/// (with a space: no OBJ keyword or PLY element key is spelt so).
+const MAX_IGNORED_NAMES: usize = 32;
+
+/// Longest name kept, in characters (an OBJ keyword is whatever starts a line).
+const MAX_IGNORED_NAME_CHARS: usize = 40;
+
+/// Count `count` ignored statements or element entries called `name`.
+pub(crate) fn note_ignored(report: &mut ImportReport, name: &str, count: u64) {
+    report.ignored_statements += count;
+    let names = &mut report.ignored_by_name;
+    let name = match name.char_indices().nth(MAX_IGNORED_NAME_CHARS) {
+        Some((cut, _)) => format!("{}...", &name[..cut]),
+        None => name.to_string(),
+    };
+    let key = match names.contains_key(&name) || names.len() < MAX_IGNORED_NAMES {
+        true => name,
+        false => "other names".to_string(),
+    };
+    *names.entry(key).or_default() += count;
+}
+
+/// `cstype (2), element camera (1)`: the ignored names, most frequent first.
+fn ignored_list(report: &ImportReport) -> String {
+    let mut names: Vec<(&String, &u64)> = report.ignored_by_name.iter().collect();
+    names.sort_by(|a, b| b.1.cmp(a.1).then(a.0.cmp(b.0)));
+    let names: Vec<String> = names.iter().map(|(n, c)| format!("{n} ({c})")).collect();
+    names.join(", ")
+}
+
 /// Log each kind of skipped input once, with its count.
 pub(crate) fn log_skips(path: &Path, report: &ImportReport) {
     let p = path.display();
@@ -82,8 +112,9 @@ pub(crate) fn log_skips(path: &Path, report: &ImportReport) {
     }
     if report.ignored_statements > 0 {
         tracing::warn!(
-            "{p}: ignored {} unsupported statements or elements",
-            report.ignored_statements
+            "{p}: ignored {} unsupported statements or elements: {}",
+            report.ignored_statements,
+            ignored_list(report)
         );
     }
     if report.trailing_bytes_ignored > 0 {

@@ -10,11 +10,18 @@ use std::path::PathBuf;
 #[derive(Debug, thiserror::Error)]
 pub enum MeshError {
     /// The operating system refused a read, write, rename, ...
-    #[error("{}: {source}", path.display())]
+    ///
+    /// The cause is part of the message and deliberately not also the error's
+    /// [`source`](std::error::Error::source): a chain printer (anyhow's `{:#}`, which the
+    /// CLI uses) prints every link of the chain, so an error that shows its cause *and*
+    /// returns it prints it twice ("x.ply: Is a directory (os error 21): Is a directory
+    /// (os error 21)"), and a wrapper that shows only our message (`#[error("{0}")]`
+    /// without `#[source]`) would lose it if the message left it out. The field is not
+    /// called `source`, which thiserror would take for the source.
+    #[error("{}: {cause}", path.display())]
     Io {
         path: PathBuf,
-        #[source]
-        source: std::io::Error,
+        cause: std::io::Error,
     },
     /// The file extension is not one of `.ply`, `.obj`, `.stl` (or the content matches none).
     #[error("{}: unknown mesh format (expected .ply, .obj or .stl, optionally .gz)", path.display())]
@@ -65,7 +72,7 @@ impl MeshError {
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> MeshError {
         MeshError::Io {
             path: path.into(),
-            source,
+            cause: source,
         }
     }
 

@@ -21,12 +21,15 @@ use std::fs::File;
 use std::io::Read;
 use std::path::Path;
 
-use crate::common::{finish_report, PolygonEmitter};
+use crate::common::{finish_report, note_ignored, PolygonEmitter};
 use crate::source::{ReadErr, Source};
 use crate::{Attributes, ImportReport, MeshError, MeshHeader, MeshVisitor, Vertex};
 
 /// Longest (joined) line accepted: a polygon with ~a million corners.
 const MAX_LINE: usize = 16 << 20;
+
+/// The forms of a `v` statement this reader accepts, for messages.
+const V_FORMS: &str = "x y z, x y z w, x y z r g b or x y z r g b a";
 
 /// Marker for "no vt / vn" in a combination key.
 const NONE: u32 = u32::MAX;
@@ -131,6 +134,12 @@ fn read_error<R: Read>(path: &Path, src: &Source<R>, e: ReadErr) -> MeshError {
         ReadErr::BadIndex(i) => {
             MeshError::malformed(path, format!("line {}", src.line), format!("bad index {i}"))
         }
+        // Only the PLY reader reads lists.
+        ReadErr::BadListCount { count, why, .. } => MeshError::malformed(
+            path,
+            format!("line {}", src.line),
+            format!("list count {count} {why}"),
+        ),
     }
 }
 
@@ -244,34 +253,52 @@ impl<'p> ObjReader<'p> {
             b"vt" => self.tex_coord(w),
             b"vn" => self.normal(w),
             b"f" | b"fo" => self.face(w, visitor),
-            b"o" | b"g" | b"s" | b"usemtl" | b"mtllib" | b"l" | b"p" | b"vp" => Ok(()),
-            _ => {
-                self.report.ignored_statements += 1;
+            // Grouping, smoothing and materials: nothing of the geometry is lost.
+            b"o" | b"g" | b"s" | b"usemtl" | b"mtllib" => Ok(()),
+            // Everything else is counted and named in the import warning, including the
+            // geometry a triangle mesh cannot hold: lines (`l`), points (`p`) and the
+            // parameter-space vertices (`vp`) of free-form curves and surfaces.
+            other => {
+                note_ignored(&mut self.report, &String::from_utf8_lossy(other), 1);
                 Ok(())
             }
         }
     }
 
     /// Parse at least `min` and at most `N` floats; returns the array and how many were read.
+    ///
+    /// More than `N` numbers is an error naming the line, not something to drop
+    /// silently: the extra numbers are most often two statements run together (a lost
+    /// newline) or a dialect this reader does not know, and guessing would shift or
+    /// discolour the mesh without a word. `expected` says what the statement may hold.
     fn floats<'a, const N: usize>(
         &self,
         what: &str,
         min: usize,
+        expected: &str,
         w: impl Iterator<Item = &'a [u8]>,
     ) -> Result<([f32; N], usize), MeshError> {
         let mut out = [0f32; N];
         let mut n = 0;
-        for word in w.take(N) {
-            out[n] = parse_f32(word).ok_or_else(|| {
+        for word in w {
+            let x = parse_f32(word).ok_or_else(|| {
                 self.malformed(format!(
-                    "{what}: '{}' is not a number",
+                    "{what}: '{}' is not a number (expected {expected})",
                     String::from_utf8_lossy(word)
                 ))
             })?;
+            if let Some(slot) = out.get_mut(n) {
+                *slot = x;
+            }
             n += 1;
         }
         if n < min {
-            return Err(self.malformed(format!("{what} needs at least {min} numbers, found {n}")));
+            return Err(self.malformed(format!(
+                "{what} needs at least {min} numbers, found {n} (expected {expected})"
+            )));
+        }
+        if n > N {
+            return Err(self.malformed(format!("{what} has {n} numbers (expected {expected})")));
         }
         Ok((out, n))
     }
@@ -281,7 +308,14 @@ impl<'p> ObjReader<'p> {
         w: impl Iterator<Item = &'a [u8]>,
         visitor: &mut dyn MeshVisitor,
     ) -> Result<(), MeshError> {
-        let (vals, n) = self.floats::<7>("v", 3, w)?;
+        // The forms in use: `x y z`, `x y z w` (w, a rational weight, is dropped: it
+        // only matters to free-form geometry) and the vertex colour extension
+        // `x y z r g b [a]`. Five numbers is none of them (see `floats` for why that
+        // and more than seven are errors rather than warnings).
+        let (vals, n) = self.floats::<7>("v", 3, V_FORMS, w)?;
+        if n == 5 {
+            return Err(self.malformed(format!("v has 5 numbers (expected {V_FORMS})")));
+        }
         let position = [vals[0], vals[1], vals[2]];
         if !position.iter().all(|c| c.is_finite()) {
             return Err(MeshError::NonFinite {
@@ -316,7 +350,7 @@ impl<'p> ObjReader<'p> {
     }
 
     fn tex_coord<'a>(&mut self, w: impl Iterator<Item = &'a [u8]>) -> Result<(), MeshError> {
-        let (vals, _) = self.floats::<3>("vt", 1, w)?;
+        let (vals, _) = self.floats::<3>("vt", 1, "u [v [w]]", w)?;
         if !(vals[0].is_finite() && vals[1].is_finite()) {
             return Err(MeshError::NonFiniteUv {
                 path: self.path.to_path_buf(),
@@ -331,7 +365,7 @@ impl<'p> ObjReader<'p> {
     }
 
     fn normal<'a>(&mut self, w: impl Iterator<Item = &'a [u8]>) -> Result<(), MeshError> {
-        let (vals, _) = self.floats::<3>("vn", 3, w)?;
+        let (vals, _) = self.floats::<3>("vn", 3, "x y z", w)?;
         self.vn_count += 1;
         if let Some(c) = &mut self.combined {
             c.normals.push(vals);
@@ -407,15 +441,16 @@ impl<'p> ObjReader<'p> {
 
     /// 1-based or negative (relative) OBJ index → 0-based, checked against `count`.
     fn resolve(&self, word: &[u8], count: u64, what: &str) -> Result<u32, MeshError> {
-        let raw: i64 = std::str::from_utf8(word)
-            .ok()
-            .and_then(|s| s.parse().ok())
-            .ok_or_else(|| {
-                self.malformed(format!(
-                    "bad {what} index '{}'",
-                    String::from_utf8_lossy(word)
-                ))
-            })?;
+        let text = String::from_utf8_lossy(word);
+        let Ok(raw) = text.parse::<i64>() else {
+            // A run of digits too long for 64 bits is an integer, just out of range.
+            let digits = text.strip_prefix(['-', '+']).unwrap_or(&text);
+            let problem = match !digits.is_empty() && digits.bytes().all(|b| b.is_ascii_digit()) {
+                true => format!("is out of range ({count} defined so far)"),
+                false => "is not an integer".to_string(),
+            };
+            return Err(self.malformed(format!("{what} index '{text}' {problem}")));
+        };
         let resolved = match raw {
             1.. => Some(raw - 1),
             ..=-1 => i64::try_from(count).ok().map(|c| c + raw),

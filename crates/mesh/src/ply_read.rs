@@ -12,7 +12,7 @@ use std::fs::File;
 use std::io::Read;
 use std::path::Path;
 
-use crate::common::{finish_report, PolygonEmitter};
+use crate::common::{finish_report, note_ignored, PolygonEmitter};
 use crate::source::{ReadErr, Source};
 use crate::{Attributes, ImportReport, MeshError, MeshHeader, MeshVisitor, Vertex};
 
@@ -198,6 +198,17 @@ impl<R: Read> Ctx<'_, R> {
             ReadErr::Io(e) => MeshError::io(self.path, e),
             ReadErr::Parse(msg) => self.malformed(format!("{}: {msg}", what())),
             ReadErr::BadIndex(i) => self.malformed(format!("{}: bad index {i}", what())),
+            ReadErr::BadListCount { count, at, why } => {
+                let at = match self.ascii {
+                    true => format!("line {at}"),
+                    false => format!("byte {at}"),
+                };
+                MeshError::malformed(
+                    self.path,
+                    at,
+                    format!("{}: list count {count} {why}", what()),
+                )
+            }
         }
     }
 }
@@ -605,18 +616,63 @@ fn list_len<D: Decoder, R: Read>(src: &mut Source<R>, ty: Scalar) -> Result<u64,
     Ok(n as u64)
 }
 
+/// A list length and where it is, for [`ReadErr::BadListCount`]: its byte offset in a
+/// binary file, its line in a text one.
+#[inline(always)]
+fn list_head<D: Decoder, R: Read>(src: &mut Source<R>, ty: Scalar) -> Result<(u64, u64), ReadErr> {
+    let start = src.offset();
+    let n = list_len::<D, R>(src, ty)?;
+    // A text token does not consume the newline after it: `line` is the count's own.
+    Ok((n, if D::BINARY { start } else { src.line }))
+}
+
+/// The end of the file inside a list whose length nothing else bounds (a strip, a
+/// property Tessera skips): say that the count may be the culprit. Truncation is the
+/// other explanation, and from the bytes alone the two cannot be told apart; the
+/// message names both, and the count, so the user can judge (4294967295 is not a length).
+fn past_end(count: u64, at: u64) -> impl Fn(ReadErr) -> ReadErr {
+    move |e| match e {
+        ReadErr::Eof => ReadErr::BadListCount {
+            count,
+            at,
+            why: "is too large: the file ends before the list does (a corrupt count, or a \
+                  truncated file)"
+                .into(),
+        },
+        other => other,
+    }
+}
+
+/// A face list longer than the vertex count cannot be a polygon Tessera keeps (by the
+/// pigeonhole principle some corner repeats, and the face would be skipped as
+/// degenerate): it is a corrupt count, which would otherwise read the rest of the file
+/// as indices and end in "file is truncated" or a bogus index far from the real problem.
+#[cold]
+fn too_many_corners(count: u64, at: u64, vertex_count: u64) -> ReadErr {
+    ReadErr::BadListCount {
+        count,
+        at,
+        why: format!(
+            "is implausible: a face cannot have more corners than the mesh has vertices \
+             ({vertex_count})"
+        ),
+    }
+}
+
 /// Read past one property value of any kind.
 fn skip_prop<D: Decoder, R: Read>(src: &mut Source<R>, kind: PropKind) -> Result<(), ReadErr> {
     match kind {
         PropKind::Scalar(s) if D::BINARY => src.skip(s.size() as u64),
         PropKind::Scalar(s) => D::value(src, s).map(drop),
         PropKind::List { count, item } => {
-            let n = list_len::<D, R>(src, count)?;
+            let (n, at) = list_head::<D, R>(src, count)?;
             if D::BINARY {
-                return src.skip(n.saturating_mul(item.size() as u64));
+                return src
+                    .skip(n.saturating_mul(item.size() as u64))
+                    .map_err(past_end(n, at));
             }
             for _ in 0..n {
-                D::value(src, item)?;
+                D::value(src, item).map_err(past_end(n, at))?;
             }
             Ok(())
         }
@@ -645,7 +701,9 @@ fn read_body<D: Decoder, R: Read>(
             read_faces::<D, R>(cx, el, &plans.fplan, vertex_count, visitor, report)?;
         } else {
             skip_element::<D, R>(cx, el)?;
-            report.ignored_statements += el.count;
+            if el.count > 0 {
+                note_ignored(report, &format!("element {}", el.name), el.count);
+            }
         }
     }
     Ok(())
@@ -799,9 +857,12 @@ fn read_strips<D: Decoder, R: Read>(
             let what = || format!("triangle strip {i} of {}", el.count);
             match kind {
                 PropKind::List { count, item } if k == plan.indices => {
-                    let n = list_len::<D, R>(&mut cx.src, count).map_err(|e| cx.err(e, what))?;
+                    let (n, at) =
+                        list_head::<D, R>(&mut cx.src, count).map_err(|e| cx.err(e, what))?;
                     for _ in 0..n {
-                        let x = D::value(&mut cx.src, item).map_err(|e| cx.err(e, what))?;
+                        let x = D::value(&mut cx.src, item)
+                            .map_err(past_end(n, at))
+                            .map_err(|e| cx.err(e, what))?;
                         if x == -1.0 {
                             len = 0;
                             continue;
@@ -852,7 +913,19 @@ fn checked_index(x: f64, vertex_count: u64) -> Result<u32, ReadErr> {
     if x >= 0.0 && x < vertex_count as f64 && (x as u32) as f64 == x {
         Ok(x as u32)
     } else {
-        Err(ReadErr::BadIndex(x as i64))
+        Err(bad_index(x))
+    }
+}
+
+/// Why `x` is no vertex index: out of range, or (text files only: binary index lists
+/// are integers by their type) not an integer at all, which must not read as "index 0
+/// out of range" (what `0.5 as i64` would say).
+#[cold]
+fn bad_index(x: f64) -> ReadErr {
+    if x.is_finite() && x.fract() == 0.0 {
+        ReadErr::BadIndex(x as i64)
+    } else {
+        ReadErr::Parse(format!("vertex index {x} is not an integer"))
     }
 }
 
@@ -865,7 +938,13 @@ fn read_face_simple<D: Decoder, R: Read>(
     vertex_count: u64,
     corners: &mut Vec<u32>,
 ) -> Result<(), ReadErr> {
-    let n = list_len::<D, R>(src, count_ty)? as usize;
+    let n = list_len::<D, R>(src, count_ty)?;
+    if n > vertex_count {
+        // The count is just behind (this path is binary only); found on the cold path.
+        let at = src.offset() - count_ty.size() as u64;
+        return Err(too_many_corners(n, at, vertex_count));
+    }
+    let n = n as usize;
     let rec = src.take(4 * n)?;
     for k in 0..n {
         corners.push(checked_index(D::at(rec, 4 * k, item), vertex_count)?);
@@ -882,7 +961,10 @@ fn read_face_generic<D: Decoder, R: Read>(
     for (k, &kind) in plan.props.iter().enumerate() {
         match kind {
             PropKind::List { count, item } if k == plan.indices => {
-                let n = list_len::<D, R>(src, count)?;
+                let (n, at) = list_head::<D, R>(src, count)?;
+                if n > vertex_count {
+                    return Err(too_many_corners(n, at, vertex_count));
+                }
                 for _ in 0..n {
                     corners.push(checked_index(D::value(src, item)?, vertex_count)?);
                 }

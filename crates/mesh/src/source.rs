@@ -22,6 +22,9 @@ pub(crate) enum ReadErr {
     Parse(String),
     /// A vertex index outside `0..vertex_count` (the raw value from the file).
     BadIndex(i64),
+    /// A list count the data cannot match (PLY): `at` is where the count is, its byte
+    /// offset in binary files or its line in text; `why` completes "list count N ...".
+    BadListCount { count: u64, at: u64, why: String },
 }
 
 impl From<std::io::Error> for ReadErr {

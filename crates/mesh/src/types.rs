@@ -1,6 +1,8 @@
 //! The vocabulary shared by every importer: what a vertex holds and how a reader hands
 //! the mesh over.
 
+use std::collections::BTreeMap;
+
 use crate::MeshError;
 
 /// Which optional per-vertex attributes a mesh carries.
@@ -68,6 +70,11 @@ pub struct ImportReport {
     pub short_faces_skipped: u64,
     /// Unknown OBJ statements or PLY elements that were ignored.
     pub ignored_statements: u64,
+    /// What `ignored_statements` counts, by name: the OBJ keyword (`cstype`, `l`) or the
+    /// PLY element (`element camera`), each with its count. At most 32 names are kept
+    /// (the keywords of a garbage file could be anything); the rest are counted under
+    /// `other names`, so the counts always sum to `ignored_statements`.
+    pub ignored_by_name: BTreeMap<String, u64>,
     /// Bytes after the last element a PLY header declares (ASCII: other than
     /// whitespace), ignored: more faces than declared, or garbage.
     pub trailing_bytes_ignored: u64,

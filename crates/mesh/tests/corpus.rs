@@ -17,6 +17,65 @@ const TARGETS: [(&str, Target); 3] = [("ply", fuzz_ply), ("obj", fuzz_obj), ("st
 /// Each regression file and a piece of the error its fix gives.
 const REGRESSIONS: &[(&str, &str, &str)] = &[];
 
+/// Hand-written malformed inputs whose messages once named the wrong problem (issue 14,
+/// failure 8), each with the target that reads it and a piece of the error it gives now.
+/// They also seed the adversarial corpus below.
+fn malformed_inputs() -> Vec<(&'static str, Vec<u8>, String)> {
+    let ply = |format: &str, count: &str| {
+        format!(
+            "ply\nformat {format} 1.0\nelement vertex 3\nproperty float x\nproperty float y\n\
+             property float z\nelement face 1\nproperty list {count} int vertex_indices\n\
+             end_header\n"
+        )
+        .into_bytes()
+    };
+    let ascii = |body: &str| [ply("ascii", "uint"), body.as_bytes().to_vec()].concat();
+    let mut binary = ply("binary_little_endian", "uint");
+    let count_at = binary.len() + 36;
+    for x in [0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0] {
+        binary.extend_from_slice(&x.to_le_bytes());
+    }
+    binary.extend_from_slice(&u32::MAX.to_le_bytes());
+    binary.extend_from_slice(&[0, 0, 0, 0, 1, 0, 0, 0, 2, 0, 0, 0]);
+    let binary_want = format!("byte {count_at}: face 0 of 1: list count 4294967295 is implausible");
+    vec![
+        (
+            "obj",
+            b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1.5 2 3\n".to_vec(),
+            "line 4: vertex index '1.5' is not an integer".into(),
+        ),
+        (
+            "obj",
+            b"v 0 0 0\nv 1 0 0 1 2 3 4 5\nv 0 1 0\nf 1 2 3\n".to_vec(),
+            "line 2: v has 8 numbers".into(),
+        ),
+        (
+            "obj",
+            b"v 0 0 0\nv 1 0 0 junk\nv 0 1 0\nf 1 2 3\n".to_vec(),
+            "line 2: v: 'junk' is not a number".into(),
+        ),
+        (
+            "ply",
+            ascii("0 0 0\n1 0 0\n0 1 0\n3 0.5 1 2\n"),
+            "line 13: face 0 of 1: vertex index 0.5 is not an integer".into(),
+        ),
+        (
+            "ply",
+            ascii("0 0 0\n1 0 0\n0 1 0\n4294967295 0 1 2\n"),
+            "line 13: face 0 of 1: list count 4294967295 is implausible".into(),
+        ),
+        ("ply", binary, binary_want),
+    ]
+}
+
+fn target(name: &str) -> Target {
+    TARGETS
+        .iter()
+        .find(|(t, _)| *t == name)
+        .map(|&(_, run)| run)
+        .unwrap_or_else(|| panic!("no fuzz target {name}"))
+}
+
 fn fuzz_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz")
 }
@@ -82,6 +141,19 @@ fn regressions_give_their_errors() {
                     assert_clear(&e);
                     assert!(e.to_string().contains(want), "{target}/{name}: {e}");
                 }
+            }
+        }
+    }
+}
+
+#[test]
+fn malformed_inputs_give_their_errors() {
+    for (name, bytes, want) in malformed_inputs() {
+        match target(name)(&bytes) {
+            Ok(r) => panic!("{name}: {want:?} reads as {r:?}"),
+            Err(e) => {
+                assert_clear(&e);
+                assert!(e.to_string().contains(&want), "{name}: {e}");
             }
         }
     }
@@ -159,15 +231,21 @@ fn adversarial_meshes_give_errors_not_panics() {
     let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
     let mut total = 0;
     let mut errors = 0;
+    let mut seeds: Vec<(Target, Vec<u8>)> = Vec::new();
     for (target, run) in TARGETS {
-        for f in files("corpus", target) {
-            let seed = read(&f);
-            for bad in malformed(&seed, &mut rng, 40) {
-                total += 1;
-                if let Err(e) = run(&bad) {
-                    assert_clear(&e);
-                    errors += 1;
-                }
+        seeds.extend(files("corpus", target).iter().map(|f| (run, read(f))));
+    }
+    seeds.extend(
+        malformed_inputs()
+            .into_iter()
+            .map(|(t, b, _)| (target(t), b)),
+    );
+    for (run, seed) in seeds {
+        for bad in malformed(&seed, &mut rng, 40) {
+            total += 1;
+            if let Err(e) = run(&bad) {
+                assert_clear(&e);
+                errors += 1;
             }
         }
     }
