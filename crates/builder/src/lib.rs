@@ -32,6 +32,10 @@ use std::time::Instant;
 use tessera_format::FormatError;
 use tessera_mesh::{ImportReport, MeshError};
 
+/// Finest quantisation grid: `2^21` cells along the cube's edge (grid coordinates stay
+/// below `2^22`, which the exact integer predicates of the builder need).
+pub const MAX_QUANT_BITS: u32 = 21;
+
 /// Everything the builder can be asked to do differently. `Default` is what
 /// `tessera build` uses.
 #[derive(Clone, Debug)]
@@ -41,10 +45,12 @@ pub struct BuildOptions {
     /// Worker threads; `None` = all cores.
     pub threads: Option<usize>,
     /// Quantisation: `2^quant_bits` grid cells along the bounding cube's edge (at most
-    /// 21). The largest position error is `sqrt(3)/2` cells. `None` (the default) picks
-    /// the bits from the input's sampling density: a cell of at most 1/16 of the mean
-    /// edge length, so the position error stays under ~5% of an edge whatever the size of
-    /// the model, and no bits are spent below that.
+    /// [`MAX_QUANT_BITS`]). The largest position error is `sqrt(3)/2` cells. `None` (the
+    /// default) picks the bits from the input
+    /// ([`partition::default_quant_bits`]): a cell of at most 1/16 of the mean edge
+    /// length, so the position error stays under ~5% of an edge whatever the size of the
+    /// model, and finer (by up to [`partition::MAX_EXTRA_BITS`] bits) where the shortest
+    /// sampled edge needs it to keep every triangle.
     pub quant_bits: Option<u32>,
     /// Most triangles in a leaf (ATP: 4000).
     pub leaf_triangles: u32,
@@ -81,10 +87,11 @@ pub use tessera_mesh::{NoProgress, Progress};
 pub enum BuildError {
     #[error("{0}")]
     Input(MeshError),
-    #[error("{}: {source}", path.display())]
+    /// The cause is in the message, not also the `source()` (printed twice in a chain).
+    #[error("{}: {cause}", path.display())]
     Io {
         path: PathBuf,
-        source: std::io::Error,
+        cause: std::io::Error,
     },
     #[error("{}: the mesh has no triangles", .0.display())]
     EmptyInput(PathBuf),
@@ -102,7 +109,7 @@ impl BuildError {
     pub(crate) fn io(path: &Path, source: std::io::Error) -> BuildError {
         BuildError::Io {
             path: path.to_path_buf(),
-            source,
+            cause: source,
         }
     }
 }
@@ -176,6 +183,13 @@ pub struct BuildReport {
     pub output_bytes: u64,
     pub stored_triangles: u64,
     pub degenerate_triangles_removed: u64,
+    /// Of `degenerate_triangles_removed`: triangles with a non-zero area in the input's
+    /// own coordinates whose corners fell on shared grid points (lost to quantisation:
+    /// a finer `quant_bits` keeps them).
+    pub triangles_collapsed_by_grid: u64,
+    /// When triangles collapsed: the bits whose grid keeps them all apart (the shortest
+    /// edge among them over `sqrt(3)` cells, at most [`MAX_QUANT_BITS`]).
+    pub quant_bits_to_keep_all: Option<u32>,
     pub duplicate_triangles_removed: u64,
     pub oversized_leaves: u64,
     /// Ears flipped and folded pairs removed after simplification (see `diamond::repair`).
@@ -239,9 +253,9 @@ pub fn build(
     progress: &dyn Progress,
 ) -> Result<BuildReport, BuildError> {
     if let Some(bits) = opts.quant_bits {
-        if !(1..=21).contains(&bits) {
+        if !(1..=MAX_QUANT_BITS).contains(&bits) {
             return Err(BuildError::Options(format!(
-                "quantization bits must be 1..=21, got {bits}"
+                "quantization bits must be 1..={MAX_QUANT_BITS}, got {bits}"
             )));
         }
     }

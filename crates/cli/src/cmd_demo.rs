@@ -55,8 +55,7 @@ fn ensure_model(dir: &Path, rebuild: bool) -> anyhow::Result<PathBuf> {
     if !rebuild {
         match Model::open(&model) {
             Ok(_) => return Ok(model),
-            Err(FormatError::Io { source, .. })
-                if source.kind() == std::io::ErrorKind::NotFound => {}
+            Err(FormatError::Io { cause, .. }) if cause.kind() == std::io::ErrorKind::NotFound => {}
             Err(e) => eprintln!("{}: {e}; building it again", model.display()),
         }
     }

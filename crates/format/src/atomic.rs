@@ -27,11 +27,9 @@ impl std::fmt::Display for AtomicFileError {
     }
 }
 
-impl std::error::Error for AtomicFileError {
-    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
-        Some(&self.source)
-    }
-}
+/// No `source()`: the message already ends with the cause, and a chain printer
+/// (anyhow's `{:#}`) would print it twice. The I/O error is the public `source` field.
+impl std::error::Error for AtomicFileError {}
 
 impl From<AtomicFileError> for crate::FormatError {
     fn from(e: AtomicFileError) -> Self {

@@ -12,11 +12,13 @@ use crate::records::NO_NODE;
 #[derive(Debug, thiserror::Error)]
 pub enum FormatError {
     /// An operating-system I/O error, with the file it concerns where known.
-    #[error("I/O error{}: {source}", path_suffix(path))]
+    ///
+    /// The cause is in the message and deliberately not also the error's `source()`:
+    /// anyhow's `{:#}` (the CLI's) prints every link of a chain, so it would print twice.
+    #[error("I/O error{}: {cause}", path_suffix(path))]
     Io {
         path: Option<PathBuf>,
-        #[source]
-        source: std::io::Error,
+        cause: std::io::Error,
     },
     /// The write was stopped (Ctrl-C) before it finished; nothing was written.
     #[error("interrupted before the model was written (nothing written)")]
@@ -71,7 +73,7 @@ impl FormatError {
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
         FormatError::Io {
             path: Some(path.into()),
-            source,
+            cause: source,
         }
     }
 
@@ -90,7 +92,10 @@ impl FormatError {
 
 impl From<std::io::Error> for FormatError {
     fn from(source: std::io::Error) -> Self {
-        FormatError::Io { path: None, source }
+        FormatError::Io {
+            path: None,
+            cause: source,
+        }
     }
 }
 

@@ -481,7 +481,7 @@ impl PatchReader for RemoteModel {
                 Err(e) => {
                     // Io errors already name the URL: repeat only their message.
                     let msg = match &e {
-                        FormatError::Io { source, .. } => source.to_string(),
+                        FormatError::Io { cause, .. } => cause.to_string(),
                         other => other.to_string(),
                     };
                     for (_, k) in run {
