@@ -11,7 +11,7 @@ use crate::diamond::{self, SimplifyConfig};
 use crate::import::Imported;
 use crate::partition::{centroid3, parent_id, read_leaf_faces, tet_id, Leaf, Partition, TetId};
 use crate::patch::{
-    grid_to_local, remove_bad_triangles, CacheOrder, Welder, WorkPatch, WorkVertex,
+    grid_to_local, remove_bad_triangles_noting, CacheOrder, Welder, WorkPatch, WorkVertex,
 };
 use crate::timing::{Phase, Phases};
 use crate::{BuildError, BuildOptions, BuildReport, Progress};
@@ -59,6 +59,10 @@ struct Ctx<'a> {
     nodes: Mutex<FxHashMap<TetId, NodeInfo>>,
     diamond_ids: AtomicU32,
     degenerate: AtomicU64,
+    /// Of `degenerate`: triangles with an area in the input, lost to the grid.
+    collapsed: AtomicU64,
+    /// Shortest input edge of a collapsed triangle (f64 bits; +inf when none).
+    collapsed_min_edge: AtomicU64,
     duplicate: AtomicU64,
     leaf_vertices_loaded: AtomicU64,
     /// Largest squared distance (f64 bits; non-negative floats order like their bits)
@@ -140,6 +144,27 @@ impl Ctx<'_> {
         self.part.quantized.release();
     }
 
+    /// Whether the input triangle `f` (global vertex indices) has a non-zero area in the
+    /// input's own coordinates: if it does and its corners share grid points, the
+    /// quantisation grid lost it. Only called for the (rare) degenerate triangles.
+    fn has_area_in_input(&self, f: [u32; 3]) -> bool {
+        if f[0] == f[1] || f[1] == f[2] || f[0] == f[2] {
+            return false;
+        }
+        let p = f.map(|g| self.imp.vertices.get(g).position.map(f64::from));
+        let shortest = (0..3)
+            .map(|k| crate::bounds::dist2(p[k], p[(k + 1) % 3]))
+            .fold(f64::INFINITY, f64::min)
+            .sqrt();
+        let area = crate::partition::has_area(&p);
+        if area && shortest > 0.0 {
+            // Non-negative floats order like their bits.
+            self.collapsed_min_edge
+                .fetch_min(shortest.to_bits(), Ordering::Relaxed);
+        }
+        area
+    }
+
     /// A leaf's patch from its bucket: weld, clean, optimise.
     fn load_leaf(&self, leaf: &Leaf) -> Result<WorkPatch, BuildError> {
         let mut lap = self.phases.lap();
@@ -178,8 +203,14 @@ impl Ctx<'_> {
             .fold(0.0f64, f64::max);
         self.leaf_far2.fetch_max(far2.to_bits(), Ordering::Relaxed);
         lap.mark(Phase::LeafLoad);
-        let c = remove_bad_triangles(&mut indices, &w.vertices);
+        let mut collapsed = 0u64;
+        let c = remove_bad_triangles_noting(&mut indices, &w.vertices, |i| {
+            if self.has_area_in_input(faces[i]) {
+                collapsed += 1;
+            }
+        });
         self.degenerate.fetch_add(c.degenerate, Ordering::Relaxed);
+        self.collapsed.fetch_add(collapsed, Ordering::Relaxed);
         self.duplicate.fetch_add(c.duplicate, Ordering::Relaxed);
         let mut p = WorkPatch {
             vertices: w.vertices,
@@ -456,6 +487,8 @@ pub(crate) fn build_hierarchy(
         nodes: Mutex::new(FxHashMap::default()),
         diamond_ids: AtomicU32::new(0),
         degenerate: AtomicU64::new(0),
+        collapsed: AtomicU64::new(0),
+        collapsed_min_edge: AtomicU64::new(f64::INFINITY.to_bits()),
         duplicate: AtomicU64::new(0),
         leaf_vertices_loaded: AtomicU64::new(0),
         leaf_far2: AtomicU64::new(0f64.to_bits()),
@@ -511,6 +544,10 @@ pub(crate) fn build_hierarchy(
         }
     }
     report.degenerate_triangles_removed = ctx.degenerate.load(Ordering::Relaxed);
+    report.triangles_collapsed_by_grid = ctx.collapsed.load(Ordering::Relaxed);
+    let shortest = f64::from_bits(ctx.collapsed_min_edge.load(Ordering::Relaxed));
+    report.quant_bits_to_keep_all = (report.triangles_collapsed_by_grid > 0)
+        .then(|| crate::partition::bits_for_edge(part.grid.size, shortest));
     report.duplicate_triangles_removed = ctx.duplicate.load(Ordering::Relaxed);
     report.simplifier_repairs = ctx.repaired.load(Ordering::Relaxed);
     finalize(&ctx, output, opts, progress, report)

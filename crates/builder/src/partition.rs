@@ -11,6 +11,7 @@
 //! leaf's contiguous range of a bucket file, whose offsets the counts give.
 
 use crate::import::{Imported, RecordStore};
+use crate::MAX_QUANT_BITS;
 use crate::{BuildError, BuildOptions, Progress};
 use rayon::prelude::*;
 use rustc_hash::{FxHashMap as HashMap, FxHashSet as HashSet};
@@ -111,7 +112,37 @@ pub fn auto_quant_bits(cube_size: f64, mean_edge: f64) -> u32 {
     if !(mean_edge > 0.0 && mean_edge.is_finite()) {
         return 16;
     }
-    ((cube_size * 16.0 / mean_edge).log2().ceil() as i64).clamp(8, 21) as u32
+    ((cube_size * 16.0 / mean_edge).log2().ceil() as i64).clamp(8, MAX_QUANT_BITS as i64) as u32
+}
+
+/// At most this many bits beyond [`auto_quant_bits`] are spent to keep the shortest
+/// sampled edge (each bit costs ~0.2 bytes per triangle, 3-5% of a model; see
+/// [`default_quant_bits`]).
+pub const MAX_EXTRA_BITS: u32 = 6;
+
+/// The fewest bits (at most [`MAX_QUANT_BITS`]) whose grid keeps two points `edge`
+/// apart on distinct grid points: points round to the nearest grid point, so two share
+/// one only when closer than a cell's diagonal, `sqrt(3)` cells.
+pub fn bits_for_edge(cube_size: f64, edge: f64) -> u32 {
+    if !(edge > 0.0 && edge.is_finite() && cube_size > 0.0) {
+        return MAX_QUANT_BITS;
+    }
+    ((cube_size * 3f64.sqrt() / edge).log2().ceil() as i64).clamp(1, MAX_QUANT_BITS as i64) as u32
+}
+
+/// The default grid: fine enough for the sampling density ([`auto_quant_bits`]) and for
+/// the shortest edge of the sampled triangles that have an area ([`bits_for_edge`]), so
+/// no input triangle collapses onto shared grid points, with at most
+/// [`MAX_EXTRA_BITS`] spent on the latter (a single sliver must not double a model's
+/// size; what still collapses is counted and reported by the build). Scans with a
+/// narrow range of triangle sizes keep the mean-edge grid.
+pub fn default_quant_bits(cube_size: f64, mean_edge: f64, shortest_edge: f64) -> u32 {
+    let by_mean = auto_quant_bits(cube_size, mean_edge);
+    if !(shortest_edge > 0.0 && shortest_edge.is_finite()) {
+        return by_mean;
+    }
+    let by_short = bits_for_edge(cube_size, shortest_edge).min(by_mean + MAX_EXTRA_BITS);
+    by_mean.max(by_short).min(MAX_QUANT_BITS)
 }
 
 /// Faces sampled for the mean edge length and the key depth.
@@ -141,22 +172,40 @@ fn release_every_samples(n: usize, release: impl FnOnce()) {
     }
 }
 
-/// Mean edge length of the sampled faces.
-fn mean_edge_length(imp: &Imported, sample: &[[u32; 3]]) -> f64 {
+/// Mean edge length of the sampled faces, and the shortest edge of those of them with
+/// an area (in the input's coordinates; +inf when none).
+fn edge_lengths(imp: &Imported, sample: &[[u32; 3]]) -> (f64, f64) {
     let mut sum = 0.0f64;
+    let mut shortest = f64::INFINITY;
     for (n, t) in sample.iter().enumerate() {
         let p = t.map(|i| imp.vertices.get(i).position.map(|c| c as f64));
+        let mut least = f64::INFINITY;
         for k in 0..3 {
-            sum += crate::bounds::dist2(p[k], p[(k + 1) % 3]).sqrt();
+            let e = crate::bounds::dist2(p[k], p[(k + 1) % 3]).sqrt();
+            sum += e;
+            least = least.min(e);
+        }
+        if least > 0.0 && has_area(&p) {
+            shortest = shortest.min(least);
         }
         release_every_samples(n, || imp.vertices.release());
     }
     imp.vertices.release();
-    if sample.is_empty() {
+    let mean = if sample.is_empty() {
         0.0
     } else {
         sum / (3 * sample.len()) as f64
-    }
+    };
+    (mean, shortest)
+}
+
+/// Whether a triangle has a non-zero area (exact for the f32 inputs' products).
+pub(crate) fn has_area(p: &[[f64; 3]; 3]) -> bool {
+    let (u, v) = (
+        [p[1][0] - p[0][0], p[1][1] - p[0][1], p[1][2] - p[0][2]],
+        [p[2][0] - p[0][0], p[2][1] - p[0][1], p[2][2] - p[0][2]],
+    );
+    u[1] * v[2] != u[2] * v[1] || u[2] * v[0] != u[0] * v[2] || u[0] * v[1] != u[1] * v[0]
 }
 
 /// Faces per chunk in passes that read the memory-mapped vertex store: small enough that
@@ -187,10 +236,10 @@ pub fn partition(
 ) -> Result<Partition, BuildError> {
     let size = Grid::new(imp.bounds.min, imp.bounds.max, 1).size;
     let sample = sample_faces(imp)?;
-    let mean_edge = mean_edge_length(imp, &sample);
+    let (mean_edge, shortest_edge) = edge_lengths(imp, &sample);
     let bits = opts
         .quant_bits
-        .unwrap_or_else(|| auto_quant_bits(size, mean_edge));
+        .unwrap_or_else(|| default_quant_bits(size, mean_edge, shortest_edge));
     let grid = Grid::new(imp.bounds.min, imp.bounds.max, bits);
     let keys_path = tmp.join("keys.bin");
     let t = std::time::Instant::now();

@@ -173,10 +173,20 @@ pub struct CleanupCounts {
 /// and exact duplicates (same vertices, same orientation); keeps first occurrences in
 /// order. Each input triangle lives in exactly one leaf, so the decision is global.
 pub fn remove_bad_triangles(indices: &mut Vec<u32>, vertices: &[WorkVertex]) -> CleanupCounts {
+    remove_bad_triangles_noting(indices, vertices, |_| {})
+}
+
+/// [`remove_bad_triangles`], calling `degenerate(i)` with the ordinal (in the input
+/// order) of each triangle dropped as degenerate.
+pub fn remove_bad_triangles_noting(
+    indices: &mut Vec<u32>,
+    vertices: &[WorkVertex],
+    mut degenerate: impl FnMut(usize),
+) -> CleanupCounts {
     let mut counts = CleanupCounts::default();
     let mut seen = FxHashSet::with_capacity_and_hasher(indices.len() / 3, Default::default());
     let mut out = Vec::with_capacity(indices.len());
-    for t in indices.chunks_exact(3) {
+    for (i, t) in indices.chunks_exact(3).enumerate() {
         let q = |k: usize| vertices[t[k] as usize].q;
         if t[0] == t[1]
             || t[1] == t[2]
@@ -186,6 +196,7 @@ pub fn remove_bad_triangles(indices: &mut Vec<u32>, vertices: &[WorkVertex]) -> 
             || q(0) == q(2)
         {
             counts.degenerate += 1;
+            degenerate(i);
             continue;
         }
         // Canonical rotation keeps orientation: start at the smallest index.

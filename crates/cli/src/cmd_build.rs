@@ -21,7 +21,8 @@ pub struct Args {
     #[arg(long)]
     threads: Option<usize>,
     /// Quantization: 2^bits grid cells along the bounding cube's edge (1..=21). Default:
-    /// chosen from the input's density (a cell of at most 1/16 of the mean edge length).
+    /// chosen from the input (a cell of at most 1/16 of the mean edge length, finer by up
+    /// to 6 bits where the shortest sampled edge needs it).
     #[arg(long)]
     quant_bits: Option<u32>,
     /// Most triangles per leaf.
@@ -65,6 +66,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     } else {
         print_report(&a.output, &r);
     }
+    warn_collapsed(&r);
     Ok(ExitCode::SUCCESS)
 }
 
@@ -87,6 +89,8 @@ pub fn report_json(r: &BuildReport) -> serde_json::Value {
         "stages": r.stage_seconds.iter().map(|(n, s)| json!({"stage": n, "seconds": s})).collect::<Vec<_>>(),
         "warnings": {
             "degenerate_triangles_removed": r.degenerate_triangles_removed,
+            "triangles_collapsed_by_grid": r.triangles_collapsed_by_grid,
+            "quant_bits_to_keep_all": r.quant_bits_to_keep_all,
             "duplicate_triangles_removed": r.duplicate_triangles_removed,
             "oversized_leaves": r.oversized_leaves,
             "import_degenerate_faces_skipped": r.import.degenerate_faces_skipped,
@@ -145,6 +149,20 @@ fn print_report(out: &std::path::Path, r: &BuildReport) {
             r.duplicate_triangles_removed,
             r.import.degenerate_faces_skipped + r.import.short_faces_skipped,
             r.oversized_leaves
+        );
+    }
+}
+
+/// Input lost to the grid: on stderr in every mode (also with --json and --quiet).
+fn warn_collapsed(r: &BuildReport) {
+    if r.triangles_collapsed_by_grid > 0 {
+        eprintln!(
+            "warning: {} input triangle(s) with a non-zero area fell onto shared grid points \
+             at {} quantisation bits and were dropped; rebuild with --quant-bits {} to keep them",
+            r.triangles_collapsed_by_grid,
+            r.quant_bits,
+            r.quant_bits_to_keep_all
+                .unwrap_or(tessera_build::MAX_QUANT_BITS)
         );
     }
 }
