@@ -276,12 +276,24 @@ fn release_mut(map: &MmapMut) {
 /// positions: on the 10M sphere this pass takes ~0.6 s on one core, which the
 /// partition's serial stretches leave idle. It stops early with
 /// [`BuildError::Interrupted`] when `stop` returns true.
+///
+/// Copies of one position (an input with texture coordinates splits its vertices at UV
+/// seams) share one normal, the sum over all their faces: otherwise each side of a seam
+/// is shaded from its own faces only and the seam shows as a crease (a textured cow
+/// rendered with sibling normals 70-160 degrees apart). `memory_bytes` bounds the
+/// position table that finds the copies ([`first_copies`]).
 pub fn compute_normals(
     imp: &Imported,
     tmp: &Path,
+    memory_bytes: u64,
     stop: &(dyn Fn() -> bool + Sync),
 ) -> Result<RecordStore<[f32; 3]>, BuildError> {
     let started = Instant::now();
+    let copies = if imp.attributes.uvs {
+        first_copies(imp, tmp, memory_bytes, stop)?
+    } else {
+        None
+    };
     let npath = tmp.join("normals.bin");
     let file = File::create(&npath).map_err(|e| BuildError::io(&npath, e))?;
     file.set_len(imp.vertex_count * 12)
@@ -306,6 +318,7 @@ pub fn compute_normals(
                 let p = |i: u32| imp.vertices.get(i).position.map(|c| c as f64);
                 let n = crate::patch::face_normal(p(t[0]), p(t[1]), p(t[2]));
                 for &i in &t {
+                    let i = copies.as_ref().map_or(i, |c| c.get(i));
                     let vn = &mut normals[i as usize];
                     for k in 0..3 {
                         vn[k] += n[k] as f32;
@@ -321,6 +334,25 @@ pub fn compute_normals(
             if done % (1 << 18) < (1 << 16) {
                 release_mut(&map);
                 imp.vertices.release();
+                if let Some(c) = &copies {
+                    c.release();
+                }
+            }
+        }
+        if let Some(c) = &copies {
+            // Each copy takes its first copy's sum (first copies come first: c[i] <= i),
+            // 4M vertices at a time between releases of the maps.
+            let n = imp.vertex_count as u32;
+            for start in (0..n).step_by(1 << 22) {
+                let normals: &mut [[f32; 3]] = bytemuck::cast_slice_mut(&mut map[..]);
+                for i in start..n.min(start + (1 << 22)) {
+                    let f = c.get(i);
+                    if f != i {
+                        normals[i as usize] = normals[f as usize];
+                    }
+                }
+                release_mut(&map);
+                c.release();
             }
         }
         normalise_released(&mut map, |n: &mut [f32; 3]| n);
@@ -332,6 +364,70 @@ pub fn compute_normals(
         "normals computed"
     );
     RecordStore::open(&npath)
+}
+
+/// For every vertex, the index of the first vertex with bit-identical position (itself
+/// for most), in a memory-mapped temporary store (4 bytes per vertex); `None` when no
+/// position repeats. Vertices go through a position table in `ceil(24 V / (memory/4))`
+/// passes, each over the positions whose hash falls in its range, so the table stays
+/// within a quarter of `memory_bytes` whatever the input size.
+pub fn first_copies(
+    imp: &Imported,
+    tmp: &Path,
+    memory_bytes: u64,
+    stop: &(dyn Fn() -> bool + Sync),
+) -> Result<Option<RecordStore<u32>>, BuildError> {
+    let n = imp.vertex_count;
+    if n == 0 {
+        return Ok(None);
+    }
+    // ~24 bytes per entry of a hash table of ([u32; 3], u32) at its load factor.
+    let per_pass = (memory_bytes / 4 / 24).max(1 << 16);
+    let passes = n.div_ceil(per_pass);
+    let path = tmp.join("first-copies.bin");
+    let file = File::create(&path).map_err(|e| BuildError::io(&path, e))?;
+    file.set_len(n * 4).map_err(|e| BuildError::io(&path, e))?;
+    drop(file);
+    let Some(mut map) = map_mut(&path)? else {
+        return Ok(None);
+    };
+    let hash = |p: &[u32; 3]| {
+        let h =
+            (u64::from(p[0]) ^ u64::from(p[1]).rotate_left(21) ^ u64::from(p[2]).rotate_left(42))
+                .wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        h % passes
+    };
+    let mut repeats = 0u64;
+    let mut table: rustc_hash::FxHashMap<[u32; 3], u32> = Default::default();
+    for pass in 0..passes {
+        table.clear();
+        for i in 0..n as u32 {
+            if i % (1 << 20) == 0 {
+                if stop() {
+                    return Err(BuildError::Interrupted);
+                }
+                imp.vertices.release();
+                release_mut(&map);
+            }
+            let p = imp.vertices.get(i).position.map(f32::to_bits);
+            if passes > 1 && hash(&p) != pass {
+                continue;
+            }
+            let f = *table.entry(p).or_insert(i);
+            bytemuck::cast_slice_mut::<u8, u32>(&mut map[..])[i as usize] = f;
+            repeats += u64::from(f != i);
+        }
+    }
+    drop(table);
+    imp.vertices.release();
+    tracing::info!(repeats, passes, "normals: copies of a position found");
+    if repeats == 0 {
+        let _ = std::fs::remove_file(&path);
+        return Ok(None);
+    }
+    map.flush().map_err(|e| BuildError::io(&path, e))?;
+    drop(map);
+    Ok(Some(RecordStore::open(&path)?))
 }
 
 /// Normalise every stored normal, 64 MiB of the map at a time, releasing the pages in

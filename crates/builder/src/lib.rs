@@ -395,7 +395,7 @@ fn build_in_pool(
         },
         || {
             imp.normals_computed
-                .then(|| import::compute_normals(imp, tmp.path(), &stop))
+                .then(|| import::compute_normals(imp, tmp.path(), opts.memory_bytes, &stop))
         },
     );
     let part = part?;
