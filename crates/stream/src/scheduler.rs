@@ -1151,12 +1151,54 @@ impl Scheduler {
     /// made resident, reading what is missing with [`PatchSource::read_now`]; `pass`
     /// draws the given resident nodes (`true`: first pass of the frame, clear the
     /// target) and is called again after evictions when the cut does not fit.
+    ///
+    /// A patch of the cut found corrupt while the frame is drawn leaves a hole only at
+    /// full resolution (which draws leaves and nothing else). In a complete frame the
+    /// frame is drawn again with the failure known, so its parent stands in for it in
+    /// this very frame (at most [`COMPLETE_REDRAWS`] times: a model with more corrupt
+    /// levels shows the rest from the next frame on).
     pub fn complete_frame<S, R, E>(
         &mut self,
         camera: &Camera,
         source: &mut S,
         store: &mut R,
         mut pass: impl FnMut(&mut R, &[u32], &[f32], bool) -> Result<(), E>,
+    ) -> Result<FrameStats, CompleteError<E>>
+    where
+        S: PatchSource + ?Sized,
+        R: ResidentStore + ?Sized,
+    {
+        let mut total = FrameStats::default();
+        for redraw in 0..=COMPLETE_REDRAWS {
+            let failed_before = self.failed.len();
+            let mut s = self.complete_frame_once(camera, source, store, &mut pass)?;
+            s.bytes_uploaded += total.bytes_uploaded;
+            s.patches_uploaded += total.patches_uploaded;
+            s.passes += total.passes;
+            s.selection_ms += total.selection_ms;
+            total = s;
+            let corrupt = |n: &u32| self.failed.contains(n) && !self.retry.contains_key(n);
+            let new_failure =
+                self.failed.len() > failed_before && self.sel.draw.iter().any(corrupt);
+            if self.opts.mode == Mode::FullResolution || !new_failure {
+                break;
+            }
+            if redraw == COMPLETE_REDRAWS {
+                tracing::warn!("corrupt patches in the cut; the next frame shows their parents");
+            } else {
+                // The frame counter moves on, so nothing of the first attempt stays pinned.
+                tracing::info!("corrupt patches in the cut; drawing the frame again");
+            }
+        }
+        Ok(total)
+    }
+
+    fn complete_frame_once<S, R, E>(
+        &mut self,
+        camera: &Camera,
+        source: &mut S,
+        store: &mut R,
+        pass: &mut dyn FnMut(&mut R, &[u32], &[f32], bool) -> Result<(), E>,
     ) -> Result<FrameStats, CompleteError<E>>
     where
         S: PatchSource + ?Sized,
@@ -1309,10 +1351,6 @@ impl Scheduler {
         for (node, error) in unavailable {
             self.unavailable(node, &error);
         }
-        let corrupt = |n: &u32| self.failed.contains(n) && !self.retry.contains_key(n);
-        if !full && self.sel.draw.iter().any(corrupt) {
-            tracing::warn!("corrupt patches in the cut; the next frame shows their parents");
-        }
         self.prev_camera = None;
         self.finish_stats(&mut stats, store);
         Ok(stats)
@@ -1325,11 +1363,11 @@ impl Scheduler {
         stats.gpu_resident_bytes = store.resident_bytes();
         stats.gpu_evictions = self.res.evictions;
         stats.ram_resident_bytes = self.ram.bytes();
-        stats.selected_nodes = self.sel.draw.len();
-        stats.triangles = self
-            .sel
-            .draw
-            .iter()
+        // What was drawn: a patch of the cut that failed to load (a full-resolution frame
+        // keeps its hole) is not counted.
+        let drawn = || self.sel.draw.iter().filter(|n| !self.failed.contains(n));
+        stats.selected_nodes = drawn().count();
+        stats.triangles = drawn()
             .map(|&n| u64::from(self.facts[n as usize].triangles))
             .sum();
         stats.max_level = self
@@ -1341,6 +1379,10 @@ impl Scheduler {
             .unwrap_or(0);
     }
 }
+
+/// Complete frames drawn again at most this many times when corrupt patches turn up in
+/// their cut ([`Scheduler::complete_frame`]).
+pub const COMPLETE_REDRAWS: usize = 3;
 
 /// Pixels the model-space `error` of a node with saturated sphere `sphere` projects to
 /// from `view` (infinite from inside the sphere).
