@@ -131,7 +131,12 @@ impl Ctx<'_> {
                 WorkVertex {
                     q,
                     normal: self.imp.normal(v, &s),
-                    color: s.color,
+                    // (Colours ignored by option: white, so they split no vertex.)
+                    color: if self.imp.attributes.colors {
+                        s.color
+                    } else {
+                        tessera_mesh::Vertex::default().color
+                    },
                     uv: s.uv,
                 }
             }
@@ -500,7 +505,7 @@ pub(crate) fn build_hierarchy(
         cfg: SimplifyConfig {
             node_triangles: opts.node_triangles as usize,
             normal_weight: 0.5,
-            color_weight: 0.5,
+            color_weight: opts.color_weight,
             has_colors: imp.attributes.colors,
             use_normals: !imp.normals_computed,
         },

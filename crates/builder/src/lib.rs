@@ -62,7 +62,17 @@ pub struct BuildOptions {
     /// pages let a remote reader fetch less of the tree it does not need, larger ones
     /// compress better.
     pub index_page_nodes: u32,
+    /// Quadric weight of vertex colours (RGB in 0..1) when simplifying; 0 lets colour
+    /// play no part in which edges collapse (it is still stored and interpolated).
+    pub color_weight: f32,
+    /// Build as if the input had no vertex colours (all white, nothing stored).
+    pub ignore_colors: bool,
 }
+
+/// [`BuildOptions::color_weight`] by default: the order of the normals' weight (0.5,
+/// meshoptimizer's suggestion for unit normals), as colour edges in scans matter as
+/// much as shape edges (measured by `scripts/bench-appearance`).
+pub const DEFAULT_COLOR_WEIGHT: f32 = 0.5;
 
 impl Default for BuildOptions {
     fn default() -> Self {
@@ -74,6 +84,8 @@ impl Default for BuildOptions {
             node_triangles: 2000,
             tmp_dir: None,
             index_page_nodes: tessera_format::DEFAULT_PAGE_NODES,
+            color_weight: DEFAULT_COLOR_WEIGHT,
+            ignore_colors: false,
         }
     }
 }
@@ -259,6 +271,12 @@ pub fn build(
             )));
         }
     }
+    if !(opts.color_weight.is_finite() && opts.color_weight >= 0.0) {
+        return Err(BuildError::Options(format!(
+            "the colour weight must be a finite number >= 0, got {}",
+            opts.color_weight
+        )));
+    }
     if opts.leaf_triangles < 16
         || opts.node_triangles < 8
         || opts.node_triangles > opts.leaf_triangles
@@ -373,6 +391,9 @@ fn build_in_pool(
         }
     };
     let mut imported = import::import(input, tmp.path(), progress)?;
+    if opts.ignore_colors {
+        imported.attributes.colors = false;
+    }
     check()?;
     report.input_vertices = imported.vertex_count;
     report.input_triangles = imported.face_count;

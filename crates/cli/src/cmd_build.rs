@@ -39,6 +39,13 @@ pub struct Args {
     #[arg(long, default_value_t = tessera_format::DEFAULT_PAGE_NODES,
           value_parser = clap::value_parser!(u32).range(1..=tessera_format::MAX_PAGE_NODES as i64))]
     index_page_nodes: u32,
+    /// Ignore the input's vertex colours (build it as if it had none).
+    #[arg(long)]
+    ignore_colors: bool,
+    /// Quadric weight of vertex colours when simplifying (0: colour does not steer the
+    /// simplification).
+    #[arg(long, default_value_t = tessera_build::DEFAULT_COLOR_WEIGHT)]
+    color_weight: f32,
     /// Print the report as JSON on stdout.
     #[arg(long)]
     json: bool,
@@ -56,6 +63,8 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         node_triangles: a.node_triangles,
         tmp_dir: a.tmp_dir,
         index_page_nodes: a.index_page_nodes,
+        color_weight: a.color_weight,
+        ignore_colors: a.ignore_colors,
     };
     let bars = Bars::new(a.quiet || a.json);
     crate::progress::install_interrupt_handler();
