@@ -58,6 +58,8 @@
 
 mod body;
 mod conn;
+#[doc(hidden)]
+pub mod fuzzing;
 mod http;
 mod models;
 mod range;
