@@ -18,9 +18,17 @@ fn uv_sphere_obj() -> String {
         let theta = std::f64::consts::PI * j as f64 / RINGS as f64;
         for i in 0..=SEGMENTS {
             let phi = std::f64::consts::TAU * (i % SEGMENTS) as f64 / SEGMENTS as f64;
-            let (x, y, z) = (theta.sin() * phi.cos(), theta.cos(), theta.sin() * phi.sin());
+            let (x, y, z) = (
+                theta.sin() * phi.cos(),
+                theta.cos(),
+                theta.sin() * phi.sin(),
+            );
             // Exactly the same coordinates for every copy of a position.
-            let (x, y, z) = if j == 0 || j == RINGS { (0.0, y, 0.0) } else { (x, y, z) };
+            let (x, y, z) = if j == 0 || j == RINGS {
+                (0.0, y, 0.0)
+            } else {
+                (x, y, z)
+            };
             writeln!(obj, "v {x:.7} {y:.7} {z:.7}").unwrap();
             let (u, v) = (i as f64 / SEGMENTS as f64, j as f64 / RINGS as f64);
             writeln!(obj, "vt {u:.6} {v:.6}").unwrap();

@@ -157,8 +157,21 @@ fn skipped_patches_are_reported_truthfully_for_the_mode() {
         let st = b.dir.path().join(format!("{tag}.json"));
         let out = b.dir.path().join(tag);
         let (code, _, stderr) = run_tessera(args![
-            "render", model, mode, "--orbit", "1", "--stats", st, "--out", out, "--width",
-            "192", "--height", "144", "--tolerance", "0.01"
+            "render",
+            model,
+            mode,
+            "--orbit",
+            "1",
+            "--stats",
+            st,
+            "--out",
+            out,
+            "--width",
+            "192",
+            "--height",
+            "144",
+            "--tolerance",
+            "0.01"
         ]);
         assert_eq!(code, 0, "{tag}: {stderr}");
         let s = stats(&st);
@@ -194,8 +207,15 @@ fn skipped_patches_are_reported_truthfully_for_the_mode() {
     assert_eq!(failed, leaves.len() as u64);
     assert!(err.contains("full resolution draws leaves only"), "{err}");
     assert!(!err.contains("parents were drawn"), "{err}");
-    let lost: u64 = leaves.iter().map(|&l| u64::from(nodes[l].triangle_count)).sum();
-    assert_eq!(full, full_good - lost, "holes of exactly the leaves' triangles");
+    let lost: u64 = leaves
+        .iter()
+        .map(|&l| u64::from(nodes[l].triangle_count))
+        .sum();
+    assert_eq!(
+        full,
+        full_good - lost,
+        "holes of exactly the leaves' triangles"
+    );
     // (A tolerance of 0.01 px puts the leaves in the complete cut.) The parent stands in
     // within the same frame: no hole (a few edge pixels may
     // differ where the coarser parent's silhouette does).
@@ -203,7 +223,10 @@ fn skipped_patches_are_reported_truthfully_for_the_mode() {
     assert!(failed >= 1);
     assert!(err.contains("their parents were drawn instead"), "{err}");
     eprintln!("background pixels: {bg_good} intact, {bg} with a corrupt leaf");
-    assert!(bg.abs_diff(bg_good) <= 40, "{bg} vs {bg_good} background pixels");
+    assert!(
+        bg.abs_diff(bg_good) <= 40,
+        "{bg} vs {bg_good} background pixels"
+    );
     let bad_root = corrupt(&[0], "root.tsr");
     let (err, _, failed, _) = render(&bad_root, "--complete", "root-complete");
     assert!(failed >= 1);
