@@ -23,8 +23,9 @@ pub enum MeshError {
         path: PathBuf,
         cause: std::io::Error,
     },
-    /// The file extension is not one of `.ply`, `.obj`, `.stl` (or the content matches none).
-    #[error("{}: unknown mesh format (expected .ply, .obj or .stl, optionally .gz)", path.display())]
+    /// The file extension is not one of `.ply`, `.obj`, `.stl`, `.gltf`, `.glb` (or the
+    /// content matches none).
+    #[error("{}: unknown mesh format (expected .ply, .obj, .stl, .gltf or .glb; PLY, OBJ and STL optionally .gz)", path.display())]
     UnknownFormat { path: PathBuf },
     /// The file ends before the data its header (or syntax) promises.
     #[error("{}: file is truncated: {detail}", path.display())]

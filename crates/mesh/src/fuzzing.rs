@@ -1,4 +1,4 @@
-//! Entry points of the fuzz targets (`fuzz/fuzz_targets/{ply,obj,stl}.rs`) and of their
+//! Entry points of the fuzz targets (`fuzz/fuzz_targets/{ply,obj,stl,gltf}.rs`) and of their
 //! replay as ordinary tests (`tests/corpus.rs`): one function per target, so the two
 //! cannot drift apart.
 //!
@@ -139,5 +139,13 @@ pub fn fuzz_stl(data: &[u8]) -> Result<ImportReport, MeshError> {
         || Ok(data),
         &mut v,
     );
+    check(r, &v)
+}
+
+/// The glTF target: the bytes as a `.gltf` or `.glb` file (GLB when they start with
+/// `glTF`), with no external files (a buffer naming one is an error).
+pub fn fuzz_gltf(data: &[u8]) -> Result<ImportReport, MeshError> {
+    let mut v = CheckingVisitor::default();
+    let r = crate::gltf_import::read_gltf_from(Path::new(FUZZ_PATH), data, None, &mut v);
     check(r, &v)
 }

@@ -1,4 +1,5 @@
-//! Mesh input and output for Tessera, streamed with bounded memory.
+//! Mesh input and output for Tessera, streamed with bounded memory (PLY, OBJ, STL and
+//! glTF 2.0 in; binary PLY out).
 //!
 //! Importers do not build an in-memory mesh: they push vertices and triangles into a
 //! [`MeshVisitor`], so the builder can spill them to disk as they arrive and a file of
@@ -10,6 +11,7 @@ mod common;
 mod error;
 #[doc(hidden)]
 pub mod fuzzing;
+mod gltf_import;
 mod obj;
 mod ply_read;
 mod ply_write;
@@ -31,6 +33,8 @@ pub enum InputFormat {
     Ply,
     Obj,
     Stl,
+    /// glTF 2.0: `.gltf` (JSON) or `.glb` (binary container).
+    Gltf,
 }
 
 impl InputFormat {
@@ -48,14 +52,22 @@ impl InputFormat {
             "ply" => Some(InputFormat::Ply),
             "obj" => Some(InputFormat::Obj),
             "stl" => Some(InputFormat::Stl),
+            "gltf" | "glb" => Some(InputFormat::Gltf),
             _ => None,
         }
     }
 
     /// The format the first bytes of a (decompressed) file show, where they are
-    /// unambiguous: `ply` starts every PLY file. OBJ and STL have no magic number.
+    /// unambiguous: `ply` starts every PLY file, `glTF` every GLB. OBJ, STL and the
+    /// JSON of a `.gltf` have no magic number.
     fn from_magic(head: &[u8]) -> Option<InputFormat> {
-        head.starts_with(b"ply").then_some(InputFormat::Ply)
+        if head.starts_with(b"ply") {
+            Some(InputFormat::Ply)
+        } else if head.starts_with(gltf_import::GLB_MAGIC) {
+            Some(InputFormat::Gltf)
+        } else {
+            None
+        }
     }
 }
 
@@ -78,8 +90,19 @@ fn head_of(r: impl std::io::Read, n: u64) -> std::io::Result<Vec<u8>> {
 /// or malformed input. An error returned by the visitor is passed through unchanged.
 ///
 /// Gzip-compressed files (by content, whatever the name: `scan.ply.gz`) are read through
-/// the inflater as they stream; the format comes from the extension (looked through
-/// `.gz`), else from the first bytes where they say it (PLY).
+/// the inflater as they stream (PLY, OBJ, STL; not glTF); the format comes from the
+/// extension (looked through `.gz`), else from the first bytes where they say it (PLY,
+/// GLB).
+///
+/// glTF 2.0 (`.gltf` with external or `data:` buffers, `.glb`) is flattened: every
+/// triangle primitive (lists, strips, fans) of every node of the default scene (else of
+/// every scene; else every mesh once), placed by its node's world transform, a mirroring
+/// transform flipping the winding; colour = `COLOR_0` x the material's base colour
+/// factor, in sRGB; UVs through the base colour texture's `KHR_texture_transform`.
+/// `KHR_mesh_quantization` and `EXT_meshopt_compression` are read; Draco and any other
+/// required extension are refused by name. Textures are not carried yet: textured
+/// materials are named in [`ImportReport::textures_not_used`] and a warning. Buffers are
+/// memory-mapped, not read into memory.
 pub fn read_mesh(path: &Path, visitor: &mut dyn MeshVisitor) -> Result<ImportReport, MeshError> {
     use flate2::read::MultiGzDecoder;
     let io = |e| MeshError::io(path, e);
@@ -88,8 +111,8 @@ pub fn read_mesh(path: &Path, visitor: &mut dyn MeshVisitor) -> Result<ImportRep
     let open_gz = || open().map(MultiGzDecoder::new);
     let format = match InputFormat::from_path(path) {
         Some(f) => Some(f),
-        None if gzip => InputFormat::from_magic(&head_of(open_gz()?, 3).map_err(io)?),
-        None => InputFormat::from_magic(&head_of(open()?, 3).map_err(io)?),
+        None if gzip => InputFormat::from_magic(&head_of(open_gz()?, 4).map_err(io)?),
+        None => InputFormat::from_magic(&head_of(open()?, 4).map_err(io)?),
     };
     let Some(format) = format else {
         return Err(MeshError::UnknownFormat {
@@ -100,6 +123,14 @@ pub fn read_mesh(path: &Path, visitor: &mut dyn MeshVisitor) -> Result<ImportRep
         (InputFormat::Ply, false) => ply_read::read_ply(path, visitor),
         (InputFormat::Obj, false) => obj::read_obj(path, visitor),
         (InputFormat::Stl, false) => stl::read_stl(path, visitor),
+        (InputFormat::Gltf, false) => gltf_import::read_gltf(path, visitor),
+        // glTF is read through a memory map (buffers are random access): inflating it
+        // would mean a temporary copy of the whole file.
+        (InputFormat::Gltf, true) => Err(MeshError::malformed(
+            path,
+            "gzip",
+            "a gzip-compressed glTF is not read; decompress it first (gunzip)",
+        )),
         (InputFormat::Ply, true) => ply_read::read_ply_from(path, open_gz()?, visitor),
         (InputFormat::Obj, true) => obj::read_obj_from(path, open_gz, visitor),
         (InputFormat::Stl, true) => {

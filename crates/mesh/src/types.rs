@@ -81,4 +81,8 @@ pub struct ImportReport {
     /// The text file ends inside its last line (no newline after it): if it was cut
     /// short there, that line's last number was read incomplete.
     pub unterminated_last_line: bool,
+    /// Textured materials whose images the build does not use yet (glTF), each as
+    /// `name (image 'x')`: they are drawn in their base colour factor (x vertex colour)
+    /// and their UVs are kept. Also logged once as a warning.
+    pub textures_not_used: Vec<String>,
 }

@@ -1,4 +1,4 @@
-//! Replays the fuzz corpora of the mesh importers (`fuzz/corpus/{ply,obj,stl}/`, the
+//! Replays the fuzz corpora of the mesh importers (`fuzz/corpus/{ply,obj,stl,gltf}/`, the
 //! committed seeds) and every crash the fuzzers found (`fuzz/regressions/<target>/`,
 //! minimised) through the fuzz targets' own bodies (`tessera_mesh::fuzzing`), on stable:
 //! no panic, errors as clear one-line messages, and for each regression the error its
@@ -7,19 +7,25 @@
 
 use std::path::{Path, PathBuf};
 
-use tessera_mesh::fuzzing::{fuzz_obj, fuzz_ply, fuzz_stl, FUZZ_PATH};
+use tessera_mesh::fuzzing::{fuzz_gltf, fuzz_obj, fuzz_ply, fuzz_stl, FUZZ_PATH};
 use tessera_mesh::{ImportReport, MeshError};
 
 type Target = fn(&[u8]) -> Result<ImportReport, MeshError>;
 
-const TARGETS: [(&str, Target); 3] = [("ply", fuzz_ply), ("obj", fuzz_obj), ("stl", fuzz_stl)];
+const TARGETS: [(&str, Target); 4] = [
+    ("ply", fuzz_ply),
+    ("obj", fuzz_obj),
+    ("stl", fuzz_stl),
+    ("gltf", fuzz_gltf),
+];
 
 /// Each regression file and a piece of the error its fix gives.
 const REGRESSIONS: &[(&str, &str, &str)] = &[];
 
 /// Hand-written malformed inputs whose messages once named the wrong problem (issue 14,
-/// failure 8), each with the target that reads it and a piece of the error it gives now.
-/// They also seed the adversarial corpus below.
+/// failure 8), and glTF files that lie about their buffers (issue 11), each with the
+/// target that reads it and a piece of the error it gives now. They also seed the
+/// adversarial corpus below.
 fn malformed_inputs() -> Vec<(&'static str, Vec<u8>, String)> {
     let ply = |format: &str, count: &str| {
         format!(
@@ -65,7 +71,33 @@ fn malformed_inputs() -> Vec<(&'static str, Vec<u8>, String)> {
             "line 13: face 0 of 1: list count 4294967295 is implausible".into(),
         ),
         ("ply", binary, binary_want),
+        (
+            "gltf",
+            gltf(r#"{"byteLength": 4, "uri": "data:application/octet-stream;base64,AAAAAA=="}"#),
+            "bufferView 0 needs bytes 0..36 of buffer 0, which has only 4 bytes".into(),
+        ),
+        (
+            "gltf",
+            gltf(r#"{"byteLength": 36, "uri": "scan.bin"}"#),
+            "buffer 0: names an external file 'scan.bin', which this reader may not open".into(),
+        ),
+        (
+            "gltf",
+            gltf(r#"{"byteLength": 36, "uri": "data:application/octet-stream;base64,A"}"#),
+            "buffer 0: bad data URI: base64".into(),
+        ),
     ]
+}
+
+/// A one-triangle glTF whose only buffer is `buffer` (JSON).
+fn gltf(buffer: &str) -> Vec<u8> {
+    format!(
+        r#"{{"asset": {{"version": "2.0"}}, "buffers": [{buffer}],
+        "bufferViews": [{{"buffer": 0, "byteLength": 36}}],
+        "accessors": [{{"bufferView": 0, "componentType": 5126, "type": "VEC3", "count": 3}}],
+        "meshes": [{{"primitives": [{{"attributes": {{"POSITION": 0}}}}]}}]}}"#
+    )
+    .into_bytes()
 }
 
 fn target(name: &str) -> Target {

@@ -427,9 +427,16 @@ fn io_errors_print_their_cause_once() {
     }
 }
 
-/// A `tracing` subscriber that keeps the messages of the events it sees.
-#[derive(Clone, Default)]
-struct Messages(std::sync::Arc<std::sync::Mutex<Vec<String>>>);
+/// The `tracing` subscriber of this test binary: it keeps the messages of the events each
+/// thread sees. Global, not scoped (`with_default`): a scoped subscriber raced with the
+/// tests on other threads, which reach the same callsites with no subscriber and can
+/// leave them cached as "never interested" (tracing-core's interest cache), so the test
+/// below missed its warning in most runs.
+struct Messages;
+
+thread_local! {
+    static SEEN: std::cell::RefCell<Vec<String>> = const { std::cell::RefCell::new(Vec::new()) };
+}
 
 impl tracing::Subscriber for Messages {
     fn enabled(&self, _: &tracing::Metadata<'_>) -> bool {
@@ -451,7 +458,7 @@ impl tracing::Subscriber for Messages {
         }
         let mut m = String::new();
         event.record(&mut Message(&mut m));
-        self.0.lock().unwrap().push(m);
+        SEEN.with(|s| s.borrow_mut().push(m));
     }
     fn enter(&self, _: &tracing::span::Id) {}
     fn exit(&self, _: &tracing::span::Id) {}
@@ -459,9 +466,15 @@ impl tracing::Subscriber for Messages {
 
 /// Read `bytes` as `name` and return the warning about ignored input.
 fn ignored_warning(name: &str, bytes: &[u8]) -> (tessera_mesh::ImportReport, String) {
-    let messages = Messages::default();
-    let (r, _) = tracing::subscriber::with_default(messages.clone(), || read_ok(name, bytes));
-    let all = messages.0.lock().unwrap().clone();
+    static INSTALL: std::sync::Once = std::sync::Once::new();
+    INSTALL.call_once(|| {
+        tracing::subscriber::set_global_default(Messages).expect("no other global subscriber");
+        // Callsites registered by other threads while the subscriber was being set.
+        tracing::callsite::rebuild_interest_cache();
+    });
+    SEEN.with(|s| s.borrow_mut().clear());
+    let (r, _) = read_ok(name, bytes);
+    let all = SEEN.with(|s| s.borrow().clone());
     let warning = all
         .iter()
         .find(|m| m.contains("ignored"))
