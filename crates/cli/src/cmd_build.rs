@@ -9,7 +9,8 @@ use tessera_build::{build, BuildOptions, BuildReport};
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// Input mesh: .ply (ascii or binary), .obj or .stl.
+    /// Input mesh: .ply (ascii or binary), .obj, .stl, .gltf or .glb (optionally
+    /// gzip-compressed, except glTF).
     input: PathBuf,
     /// Output model.
     #[arg(short, long)]
