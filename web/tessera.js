@@ -8,11 +8,17 @@
 //   v.addEventListener('error', (e) => console.error(e.detail.message));
 //   v.setCamera({ position, target, up, fov_y_deg, width, height });  // docs/camera.md
 //   v.camera();     // the current camera (sized as the canvas)
+//   await v.screenshot();  // a PNG Blob of the view at the canvas's pixel size
+//   await v.pointAt(x, y);  // the point drawn under canvas pixel (x, y), or null
 //   v.dispose();    // stops the frame loop, frees the GPU and wasm memory
 //
 // Tessera.view rejects with an Error whose message is meant for the page (no WebGL2, a
 // 404 model, a server without Range support, a model of a newer format version).
-// Mouse: left drag orbits, right / middle / shift-left drag pans, the wheel zooms.
+// Mouse: left drag orbits, right / middle / shift-left drag pans, the wheel zooms
+// toward the point under the cursor, a double-click moves the pivot onto it.
+// Touch (Pointer Events, the canvas's touch-action set to none so the page does not
+// scroll): one finger orbits, two fingers pinch to zoom (about the point under their
+// centre) and drag to pan.
 
 import init, { Viewer } from './tessera_web.js';
 
@@ -51,6 +57,18 @@ export class View extends EventTarget {
   #frameTimes = [];
   #listeners = [];
   #resizeObserver = null;
+  #shots = [];
+  // Touch: the fingers down (pointerId -> canvas pixels) and the gesture they make
+  // (null, or the fingers' count and, for two, their last spread).
+  #touches = new Map();
+  #gesture = null;
+  // Fingers moved since the gesture last followed them (applied once a frame, so the
+  // two fingers of a pinch move together: their separate events would pan back and
+  // forth between them).
+  #touchMoved = false;
+  // pointAt() calls waiting for their answer (id -> resolve).
+  #pointQueries = new Map();
+  #nextQuery = 1;
 
   constructor(viewer, canvas, autoResize) {
     super();
@@ -84,6 +102,40 @@ export class View extends EventTarget {
     return JSON.parse(this.#viewer.camera());
   }
 
+  /**
+   * The current view as a PNG `Blob`, at the canvas's pixel size (canvas.width x
+   * canvas.height). A WebGL canvas is cleared once the browser has shown it, so the
+   * view is drawn again and the canvas read in the same task, right after that frame.
+   */
+  screenshot() {
+    return new Promise((resolve, reject) => {
+      if (this.#disposed) {
+        reject(new Error('screenshot: the view was disposed'));
+        return;
+      }
+      this.#shots.push({ resolve, reject });
+      this.#viewer.redraw();
+    });
+  }
+
+  /**
+   * The point drawn under canvas pixel (`x`, `y`) (canvas.width x canvas.height
+   * pixels, top-left origin), in model coordinates: the depth of the last frame read
+   * back and unprojected (the surface of the cut drawn, not the full-resolution pick).
+   * Resolves to [x, y, z], or null over the background.
+   */
+  pointAt(x, y) {
+    return new Promise((resolve, reject) => {
+      if (this.#disposed) {
+        reject(new Error('pointAt: the view was disposed'));
+        return;
+      }
+      const id = this.#nextQuery++;
+      this.#pointQueries.set(id, resolve);
+      this.#viewer.point_at(id, x, y);
+    });
+  }
+
   /** Back to the home view. */
   reset() {
     this.#viewer.reset();
@@ -104,6 +156,25 @@ export class View extends EventTarget {
     if (this.#resizeObserver) this.#resizeObserver.disconnect();
     this.#viewer.free();
     this.#viewer = null;
+    for (const s of this.#shots.splice(0)) s.reject(new Error('screenshot: the view was disposed'));
+    for (const resolve of this.#pointQueries.values()) resolve(null);
+    this.#pointQueries.clear();
+  }
+
+  // Reads the canvas just drawn (same task: before the browser composites and clears
+  // it) into a PNG for the waiting screenshot() calls.
+  #takeShots() {
+    const shots = this.#shots.splice(0);
+    try {
+      this.#canvas.toBlob((blob) => {
+        for (const s of shots) {
+          if (blob) s.resolve(blob);
+          else s.reject(new Error('screenshot: the canvas could not be encoded as PNG'));
+        }
+      }, 'image/png');
+    } catch (e) {
+      for (const s of shots) s.reject(e);
+    }
   }
 
   #fit() {
@@ -130,29 +201,97 @@ export class View extends EventTarget {
     return [(e.clientX - r.left) * sx, (e.clientY - r.top) * sy];
   }
 
+  // The first two fingers: their centre and spread (canvas pixels).
+  #twoFingers() {
+    const [[ax, ay], [bx, by]] = this.#touches.values();
+    return [(ax + bx) / 2, (ay + by) / 2, Math.hypot(bx - ax, by - ay)];
+  }
+
+  // Fingers came or went: the gesture running ends (inertia may carry it on) and one
+  // for the fingers now down starts where they are, so nothing jumps.
+  #touchRestart() {
+    if (this.#gesture) this.#viewer.pointer_up();
+    if (this.#gesture && this.#gesture.fingers === 2) this.#viewer.pinch_end();
+    this.#gesture = null;
+    if (this.#touches.size === 1) {
+      const [[x, y]] = this.#touches.values();
+      this.#viewer.pointer_down(0, x, y, false);
+      this.#gesture = { fingers: 1 };
+    } else if (this.#touches.size >= 2) {
+      const [cx, cy, spread] = this.#twoFingers();
+      this.#viewer.pointer_down(2, cx, cy, false);
+      this.#gesture = { fingers: 2, spread };
+    }
+  }
+
+  #touchMove() {
+    const g = this.#gesture;
+    if (!g || !this.#touchMoved) return;
+    this.#touchMoved = false;
+    if (g.fingers === 1) {
+      const [[x, y]] = this.#touches.values();
+      this.#viewer.pointer_move(x, y);
+      return;
+    }
+    // Two fingers: their centre pans, their spread zooms about it.
+    const [cx, cy, spread] = this.#twoFingers();
+    this.#viewer.pointer_move(cx, cy);
+    if (g.spread > 0 && spread > 0 && spread !== g.spread) this.#viewer.pinch(spread / g.spread, cx, cy);
+    g.spread = spread;
+  }
+
   #bindInput() {
     const c = this.#canvas;
+    // No scrolling or browser zoom on the canvas: touches are the view's.
+    c.style.touchAction = 'none';
     this.#on(c, 'pointerdown', (e) => {
       if (this.#disposed) return;
       c.setPointerCapture(e.pointerId);
       const [x, y] = this.#pixels(e);
-      this.#viewer.pointer_down(e.button, x, y, e.shiftKey);
+      if (e.pointerType === 'touch') {
+        this.#touchMove(); // the moves so far, with the fingers they were made by
+        this.#touches.set(e.pointerId, [x, y]);
+        this.#touchRestart();
+      } else {
+        this.#viewer.pointer_down(e.button, x, y, e.shiftKey);
+      }
       this.dispatchEvent(new CustomEvent('interact'));
       e.preventDefault();
     });
     this.#on(c, 'pointermove', (e) => {
       if (this.#disposed) return;
       const [x, y] = this.#pixels(e);
-      this.#viewer.pointer_move(x, y);
+      if (e.pointerType === 'touch') {
+        if (!this.#touches.has(e.pointerId)) return;
+        this.#touches.set(e.pointerId, [x, y]);
+        this.#touchMoved = true;
+      } else {
+        this.#viewer.pointer_move(x, y);
+      }
     });
     const up = (e) => {
       if (this.#disposed) return;
       if (c.hasPointerCapture(e.pointerId)) c.releasePointerCapture(e.pointerId);
-      this.#viewer.pointer_up();
+      if (e.pointerType === 'touch') {
+        if (this.#touches.has(e.pointerId)) {
+          this.#touchMove();
+          this.#touches.delete(e.pointerId);
+          this.#touchRestart();
+        }
+      } else {
+        this.#viewer.pointer_up();
+      }
     };
     this.#on(c, 'pointerup', up);
     this.#on(c, 'pointercancel', up);
     this.#on(c, 'contextmenu', (e) => e.preventDefault());
+    this.#on(c, 'dblclick', (e) => {
+      if (this.#disposed) return;
+      const [x, y] = this.#pixels(e);
+      this.#viewer.recentre_at(x, y);
+      this.dispatchEvent(new CustomEvent('interact'));
+      e.preventDefault();
+    });
     this.#on(
       c,
       'wheel',
@@ -161,7 +300,8 @@ export class View extends EventTarget {
         e.preventDefault();
         // One notch (100 px, or 3 lines) is one zoom step; positive zooms in.
         const px = e.deltaMode === 1 ? e.deltaY * 33 : e.deltaMode === 2 ? e.deltaY * 400 : e.deltaY;
-        this.#viewer.wheel(-px / 100);
+        const [x, y] = this.#pixels(e);
+        this.#viewer.wheel(-px / 100, x, y);
         this.dispatchEvent(new CustomEvent('interact'));
       },
       { passive: false },
@@ -172,6 +312,7 @@ export class View extends EventTarget {
     if (this.#disposed) return;
     let stats;
     try {
+      this.#touchMove();
       stats = JSON.parse(this.#viewer.frame(t));
     } catch (e) {
       const message = e && e.message ? e.message : String(e);
@@ -182,9 +323,15 @@ export class View extends EventTarget {
     }
     if (stats.drew) {
       this.#frameTimes.push(t);
+      if (this.#shots.length) this.#takeShots();
     }
     while (this.#frameTimes.length && this.#frameTimes[0] < t - 1000) this.#frameTimes.shift();
     stats.fps = this.#frameTimes.length;
+    for (const { id, point } of stats.picks || []) {
+      const resolve = this.#pointQueries.get(id);
+      this.#pointQueries.delete(id);
+      if (resolve) resolve(point);
+    }
     this.#stats = stats;
     // Idle once two frames in a row have converged: the last one drawn is on screen.
     this.#convergedFrames = stats.idle ? this.#convergedFrames + 1 : 0;

@@ -6,7 +6,12 @@
 //! matches `tessera render --complete` of the same camera. The default page (the
 //! catalogue's first model) converges too. Errors show a clear message on the page: a
 //! 404 model, a server without range support, a model of a newer format version, a
-//! browser without WebGL2.
+//! browser without WebGL2. The module's `screenshot()` and the page's Save PNG button
+//! give PNGs of the canvas's size that are not blank and match the canvas and `tessera
+//! render`; touch (CDP touch events) orbits with one finger, pinches to zoom about the
+//! fingers' centre and pans with two; a double-click moves the pivot onto the surface
+//! (the depth read back, checked against a ray cast on the input mesh) and the wheel
+//! zooms toward the point under the cursor, which stays under it.
 //!
 //! Builds nothing itself: without `web/dist` (or `TESSERA_WEB_DIST`) it fails saying to
 //! run `scripts/build-web` (`.ci/run` does, and installs chromium and playwright-core).
@@ -21,6 +26,7 @@ use std::process::{Child, Command, Stdio};
 use common::*;
 use serde_json::{json, Value};
 use tessera_image::{psnr, Image};
+use tessera_select::Camera;
 
 /// PSNR the browser's frame must reach against `tessera render --complete` of the same
 /// camera. Measured (Chromium 156, ANGLE on SwiftShader vs lavapipe, Bunny at 480x360):
@@ -240,6 +246,203 @@ fn render(model: &Path, camera: &str, out: &Path) -> (Image, u64) {
     )
 }
 
+/// Picking through the depth buffer (browser.mjs "pick"): the point under the centre
+/// pixel and the pivot a double-click there moves to, against the full-resolution
+/// surface of the input mesh along the same ray (what the native full-resolution pick
+/// finds; the page reads the depth of the drawn cut, within the 1-pixel tolerance of
+/// it), and a wheel step at an off-centre pixel keeping the point under that pixel.
+fn pick_checks(r: &Value, mesh_path: &Path) {
+    let p = &r["pick"];
+    assert!(p.is_object(), "no pick result: {r:#}");
+    let cam = |v: &Value| Camera::from_json_value(v).unwrap();
+    let point = |v: &Value| -> [f64; 3] {
+        assert!(v.is_array(), "no point: {p:#}");
+        std::array::from_fn(|i| v[i].as_f64().unwrap())
+    };
+    let sub = |a: [f64; 3], b: [f64; 3]| -> [f64; 3] { std::array::from_fn(|i| a[i] - b[i]) };
+    let dot = |a: [f64; 3], b: [f64; 3]| (0..3).map(|i| a[i] * b[i]).sum::<f64>();
+    let len = |a: [f64; 3]| dot(a, a).sqrt();
+    let before = cam(&p["before"]);
+    // The ray through the centre of the centre pixel, cast on the input mesh.
+    let (cx, cy) = (f64::from(WIDTH / 2) + 0.5, f64::from(HEIGHT / 2) + 0.5);
+    let (eye, dir) = pixel_ray(&before, cx, cy);
+    let (vertices, triangles) = load_mesh(mesh_path);
+    let t = nearest_hit(eye, dir, &vertices, &triangles).expect("the centre ray misses the mesh");
+    let surface: [f64; 3] = std::array::from_fn(|i| eye[i] + dir[i] * t);
+    // One pixel at that depth, model units.
+    let pixel =
+        2.0 * t * dot(dir, before.basis().forward.to_array()) * (0.5 * before.fov_y_rad()).tan()
+            / f64::from(HEIGHT);
+    let queried = point(&p["centre_point"]);
+    let pivot = point(&p["recentred"]["target"]);
+    let e_query = len(sub(queried, surface));
+    let e_pivot = len(sub(pivot, surface));
+    let old_pivot = before.target;
+    eprintln!(
+        "pick: centre pixel {t:.5} units deep on the input mesh (1 px = {pixel:.2e}); pointAt is {e_query:.2e} from it ({:.2} px), the double-clicked pivot {e_pivot:.2e} ({:.2} px; it moved {:.2e} from {old_pivot:?})",
+        e_query / pixel,
+        e_pivot / pixel,
+        len(sub(pivot, old_pivot))
+    );
+    assert!(
+        e_pivot < 2.0 * pixel,
+        "the double-click pivot is off the surface: {e_pivot:.2e} ({p:#})"
+    );
+    assert!(
+        e_query < 2.0 * pixel,
+        "pointAt is off the surface: {e_query:.2e}"
+    );
+    // Recentre keeps the orientation and brings the point to the centre at its depth.
+    let rec = cam(&p["recentred"]);
+    let turn = dot(
+        rec.basis().forward.to_array(),
+        before.basis().forward.to_array(),
+    );
+    assert!(turn > 1.0 - 1e-9, "recentre turned the view: {turn}");
+    assert!(
+        len(sub(pivot, old_pivot)) > 5.0 * pixel,
+        "the pivot did not move: {p:#}"
+    );
+
+    // Zoom to the cursor: the point under an off-centre pixel stays under it.
+    let z = &p["zoom"];
+    assert!(z.is_object(), "no off-centre pixel hit the model: {p:#}");
+    let (zx, zy) = (
+        z["pixel"][0].as_f64().unwrap(),
+        z["pixel"][1].as_f64().unwrap(),
+    );
+    let q = point(&z["point"]);
+    let after = cam(&z["after"]);
+    let (ux, uy) = project(&after, q);
+    let off_px = ((ux - (zx + 0.5)).powi(2) + (uy - (zy + 0.5)).powi(2)).sqrt();
+    let d0 = len(sub(rec.position, rec.target));
+    let d1 = len(sub(after.position, after.target));
+    let again = point(&z["point_after"]);
+    let drift = len(sub(again, q));
+    let pixel_after =
+        2.0 * len(sub(q, after.position)) * (0.5 * after.fov_y_rad()).tan() / f64::from(HEIGHT);
+    eprintln!(
+        "zoom to the cursor at ({zx}, {zy}): the point is {off_px:.3} px from that pixel after a wheel step (distance x{:.3}); pointAt there afterwards {drift:.2e} from it ({:.2} px)",
+        d1 / d0,
+        drift / pixel_after
+    );
+    assert!(d1 < d0 * 0.95, "the wheel did not zoom in: {z:#}");
+    assert!(
+        off_px < 2.0,
+        "the point left the cursor: {off_px:.2} px ({z:#})"
+    );
+    // And the surface drawn under that pixel afterwards is the same point.
+    assert!(
+        drift < 2.0 * pixel_after,
+        "another point under the cursor after the zoom: {drift:.2e}"
+    );
+    assert!(
+        len(sub(after.target, rec.target)) > 0.0,
+        "zoomed toward the pivot, not the point"
+    );
+}
+
+fn pixel_ray(c: &Camera, x: f64, y: f64) -> ([f64; 3], [f64; 3]) {
+    let b = c.basis();
+    let tan_y = (0.5 * c.fov_y_rad()).tan();
+    let nx = x / f64::from(c.width) * 2.0 - 1.0;
+    let ny = 1.0 - y / f64::from(c.height) * 2.0;
+    let d = b.forward + b.right * (nx * tan_y * c.aspect()) + b.up * (ny * tan_y);
+    (c.position, d.normalize().to_array())
+}
+
+/// Pixel coordinates (continuous, top-left origin) of `p` seen by `c`.
+fn project(c: &Camera, p: [f64; 3]) -> (f64, f64) {
+    let b = c.basis();
+    let d: [f64; 3] = std::array::from_fn(|i| p[i] - c.position[i]);
+    let along = |v: [f64; 3]| (0..3).map(|i| d[i] * v[i]).sum::<f64>();
+    let z = along(b.forward.to_array());
+    let tan_y = (0.5 * c.fov_y_rad()).tan();
+    let nx = along(b.right.to_array()) / (z * tan_y * c.aspect());
+    let ny = along(b.up.to_array()) / (z * tan_y);
+    (
+        (nx + 1.0) * 0.5 * f64::from(c.width),
+        (1.0 - ny) * 0.5 * f64::from(c.height),
+    )
+}
+
+fn load_mesh(path: &Path) -> (Vec<[f64; 3]>, Vec<[u32; 3]>) {
+    struct Collect(Vec<[f64; 3]>, Vec<[u32; 3]>);
+    impl tessera_mesh::MeshVisitor for Collect {
+        fn header(&mut self, _: &tessera_mesh::MeshHeader) -> Result<(), tessera_mesh::MeshError> {
+            Ok(())
+        }
+        fn vertex(&mut self, v: &tessera_mesh::Vertex) -> Result<(), tessera_mesh::MeshError> {
+            self.0.push(v.position.map(f64::from));
+            Ok(())
+        }
+        fn triangle(&mut self, t: [u32; 3]) -> Result<(), tessera_mesh::MeshError> {
+            self.1.push(t);
+            Ok(())
+        }
+    }
+    let mut c = Collect(Vec::new(), Vec::new());
+    tessera_mesh::read_mesh(path, &mut c).unwrap();
+    (c.0, c.1)
+}
+
+/// The nearest hit (ray parameter, `dir` unit) of the ray on the triangles, either
+/// side (Moller-Trumbore in f64).
+fn nearest_hit(o: [f64; 3], d: [f64; 3], v: &[[f64; 3]], tris: &[[u32; 3]]) -> Option<f64> {
+    let sub = |a: [f64; 3], b: [f64; 3]| -> [f64; 3] { std::array::from_fn(|i| a[i] - b[i]) };
+    let cross = |a: [f64; 3], b: [f64; 3]| {
+        [
+            a[1] * b[2] - a[2] * b[1],
+            a[2] * b[0] - a[0] * b[2],
+            a[0] * b[1] - a[1] * b[0],
+        ]
+    };
+    let dot = |a: [f64; 3], b: [f64; 3]| (0..3).map(|i| a[i] * b[i]).sum::<f64>();
+    let mut best: Option<f64> = None;
+    for t in tris {
+        let (a, b, c) = (v[t[0] as usize], v[t[1] as usize], v[t[2] as usize]);
+        let (e1, e2) = (sub(b, a), sub(c, a));
+        let p = cross(d, e2);
+        let det = dot(e1, p);
+        if det.abs() < 1e-300 {
+            continue;
+        }
+        let s = sub(o, a);
+        let u = dot(s, p) / det;
+        if !(0.0..=1.0).contains(&u) {
+            continue;
+        }
+        let q = cross(s, e1);
+        let w = dot(d, q) / det;
+        if w < 0.0 || u + w > 1.0 {
+            continue;
+        }
+        let h = dot(e2, q) / det;
+        if h > 0.0 && best.is_none_or(|b| h < b) {
+            best = Some(h);
+        }
+    }
+    best
+}
+
+/// An image of `img`'s size filled with its top-left pixel (the background: the test
+/// views leave the corners empty; checked against the renderer's clear colour).
+fn background_like(img: &Image) -> Image {
+    let bg = img.pixel(0, 0);
+    // Renderer::background (0.06, 0.07, 0.09), stored unencoded.
+    for (c, want) in [15u8, 18, 23].into_iter().enumerate() {
+        assert!(
+            bg[c].abs_diff(want) <= 2,
+            "corner pixel {bg:?} is not the background"
+        );
+    }
+    Image {
+        width: img.width,
+        height: img.height,
+        rgba: bg.repeat((img.width * img.height) as usize),
+    }
+}
+
 #[test]
 fn the_page_shows_the_model_as_tessera_render_and_errors_clearly() {
     let web = dist();
@@ -293,19 +496,29 @@ fn the_page_shows_the_model_as_tessera_render_and_errors_clearly() {
 
     let camera_a = format!(r#"{CAMERA_A}, "width": {WIDTH}, "height": {HEIGHT}}}"#);
     let shot = dir.join("browser.png");
+    let api_shot = dir.join("api-shot.png");
+    let download = dir.join("download.png");
+    let naive_shot = dir.join("naive-shot.png");
     let paged_shot = dir.join("paged.png");
     let embed_shot = dir.join("embed.png");
     let home = dir.join("home.png");
     let base = format!("http://{addr}");
     let visits = json!([
         {"name": "camera", "url": format!("{base}/?model=/models/bunny.tsr#camera={}", encode(&camera_a)),
-         "expect": "idle", "screenshot": shot, "timeout_ms": 120000, "viewport": [800, 480]},
+         "expect": "idle", "screenshot": shot, "api_shot": api_shot, "download": download, "naive_shot": naive_shot,
+         "timeout_ms": 120000, "viewport": [800, 480]},
         {"name": "paged", "url": format!("{base}/?model=/models/paged.tsr#camera={}", encode(&camera_a)),
          "expect": "idle", "screenshot": paged_shot, "timeout_ms": 120000, "viewport": [800, 480]},
         {"name": "embed-paged", "url": format!("{base}/embed.html?model=/models/paged.tsr&prefixBytes=1024#camera={}", encode(&camera_a)),
          "expect": "idle", "screenshot": embed_shot, "timeout_ms": 120000, "viewport": [800, 480]},
         {"name": "home", "url": format!("{base}/"), "expect": "idle", "screenshot": home,
          "timeout_ms": 120000, "viewport": [640, 480], "drag": [120, 40]},
+        {"name": "pick", "url": format!("{base}/?model=/models/bunny.tsr#camera={}", encode(&camera_a)),
+         "expect": "idle", "timeout_ms": 120000, "viewport": [800, 480],
+         "pick": {"size": [WIDTH, HEIGHT], "centre": [WIDTH / 2, HEIGHT / 2],
+                  "off": [[150, 250], [170, 220], [300, 120], [200, 140], [280, 230]]}},
+        {"name": "touch", "url": format!("{base}/embed.html?model=/models/bunny.tsr"), "expect": "idle",
+         "timeout_ms": 120000, "viewport": [800, 600], "touch": true},
         {"name": "404", "url": format!("{base}/?model=/models/nope.tsr"), "expect": "error",
          "timeout_ms": 60000},
         {"name": "no-range", "url": format!("http://{plain_addr}/?model=/copy.tsr"), "expect": "error",
@@ -344,7 +557,7 @@ fn the_page_shows_the_model_as_tessera_render_and_errors_clearly() {
             }
         );
     }
-    for name in ["camera", "paged", "embed-paged", "home"] {
+    for name in ["camera", "paged", "embed-paged", "home", "touch", "pick"] {
         let r = by(name);
         assert_eq!(r["outcome"], "idle", "{name}: {r:#}");
         assert_eq!(r["stats"]["pending"], 0, "{name}: {r:#}");
@@ -379,6 +592,79 @@ fn the_page_shows_the_model_as_tessera_render_and_errors_clearly() {
         "after a drag and a wheel step: idle again in {} ms",
         i["ms"]
     );
+    // Touch (CDP touch events -> pointer events of pointerType touch): one finger
+    // orbits (same distance and pivot, another direction), two fingers spreading zoom
+    // in, two fingers moving together pan (the pivot moves, the distance stays); the
+    // module sets touch-action: none on the canvas (the embedding page does not), so
+    // the page does not scroll.
+    let t = &by("touch")["touch"];
+    assert!(t.is_object(), "no touch result: {:#}", by("touch"));
+    let vec3 =
+        |c: &Value, k: &str| -> [f64; 3] { std::array::from_fn(|i| c[k][i].as_f64().unwrap()) };
+    let off = |c: &Value| -> [f64; 3] {
+        let (p, q) = (vec3(c, "position"), vec3(c, "target"));
+        std::array::from_fn(|i| p[i] - q[i])
+    };
+    let len = |a: [f64; 3]| a.iter().map(|x| x * x).sum::<f64>().sqrt();
+    let angle_deg = |a: [f64; 3], b: [f64; 3]| {
+        let dot: f64 = (0..3).map(|i| a[i] * b[i]).sum();
+        (dot / (len(a) * len(b)))
+            .clamp(-1.0, 1.0)
+            .acos()
+            .to_degrees()
+    };
+    let moved = |a: &Value, b: &Value| {
+        let (p, q) = (vec3(a, "target"), vec3(b, "target"));
+        len(std::array::from_fn(|i| p[i] - q[i]))
+    };
+    let (start, orbit, pinch, pan) = (&t["start"], &t["orbit"], &t["pinch"], &t["pan"]);
+    let turned = angle_deg(off(start), off(orbit));
+    let orbit_ratio = len(off(orbit)) / len(off(start));
+    let pinch_ratio = len(off(pinch)) / len(off(orbit));
+    let pan_ratio = len(off(pan)) / len(off(pinch));
+    let panned = moved(pinch, pan) / len(off(pinch));
+    eprintln!(
+        "touch: one-finger drag turned the view {turned:.1} deg (distance x{orbit_ratio:.4}, pivot moved {:.2e}); pinch 80 -> 240 px: distance x{pinch_ratio:.3}; two-finger drag: pivot moved {panned:.3} distances (distance x{pan_ratio:.3}); touch-action {}, scroll {}",
+        moved(start, orbit),
+        t["touchAction"],
+        t["scroll"]
+    );
+    assert!(turned > 10.0, "the one-finger drag did not orbit: {t:#}");
+    assert!(
+        (orbit_ratio - 1.0).abs() < 1e-3,
+        "the orbit changed the distance: {t:#}"
+    );
+    assert!(
+        moved(start, orbit) < 1e-9 * len(off(start)).max(1.0),
+        "the orbit moved the pivot: {t:#}"
+    );
+    // Spread x3: the distance / 3 (at once; inertia of the pan part aside).
+    assert!(pinch_ratio < 0.5, "the pinch did not zoom in: {t:#}");
+    // About the point under the fingers' centre: it stays there.
+    let q: [f64; 3] = std::array::from_fn(|i| {
+        t["pinch_point"][i]
+            .as_f64()
+            .expect("nothing under the pinch")
+    });
+    let (ux, uy) = project(&Camera::from_json_value(pinch).unwrap(), q);
+    let (px, py) = (
+        t["pinch_at"][0].as_f64().unwrap(),
+        t["pinch_at"][1].as_f64().unwrap(),
+    );
+    let pinch_off = ((ux - px).powi(2) + (uy - py).powi(2)).sqrt();
+    eprintln!("pinch about ({px}, {py}): the point drawn there is {pinch_off:.2} px from the fingers' centre after it");
+    assert!(
+        pinch_off < 2.0,
+        "the pinch did not zoom about its centre: {pinch_off:.2} px ({t:#})"
+    );
+    assert!(panned > 0.05, "the two-finger drag did not pan: {t:#}");
+    assert!(
+        (pan_ratio - 1.0).abs() < 0.02,
+        "the two-finger drag zoomed: {t:#}"
+    );
+    assert_eq!(t["touchAction"], "none", "{t:#}");
+    assert_eq!(t["scroll"], json!([0, 0]), "the page scrolled: {t:#}");
+    pick_checks(by("pick"), &bunny);
     let shown = |name: &str, needle: &str| {
         let r = by(name);
         assert_eq!(r["outcome"], "error", "{name}: {r:#}");
@@ -410,6 +696,56 @@ fn the_page_shows_the_model_as_tessera_render_and_errors_clearly() {
         p_wrong < MIN_PSNR_DB,
         "negative control: another camera's frame passed at {p_wrong:.2} dB"
     );
+    // The module's screenshot() and the page's Save PNG button: PNGs of the canvas's
+    // size, not blank (a WebGL canvas reads back cleared once composited: the module
+    // reads it right after drawing), the same picture as the page's canvas and as
+    // tessera render.
+    let s = &by("camera")["shot"];
+    assert!(s.is_object(), "no screenshot result: {:#}", by("camera"));
+    assert_eq!(s["type"], "image/png", "{s:#}");
+    assert_eq!(s["canvas"], json!([WIDTH, HEIGHT]), "{s:#}");
+    assert!(
+        s["download_name"]
+            .as_str()
+            .is_some_and(|n| n.ends_with(".png") && n.starts_with("bunny")),
+        "Save PNG's file name: {s:#}"
+    );
+    for (what, path) in [("screenshot()", &api_shot), ("Save PNG", &download)] {
+        let img = Image::load_png(path).unwrap_or_else(|e| panic!("{what}: not a PNG: {e}"));
+        assert_eq!((img.width, img.height), (WIDTH, HEIGHT), "{what}: size");
+        let (lit, _) = tessera_image::diff_stats(&img, &background_like(&img), 8).unwrap();
+        let total = (WIDTH * HEIGHT) as usize;
+        let p_render = psnr(&img, &same).unwrap_or(f64::INFINITY);
+        let p_canvas = psnr(&img, &browser).unwrap_or(f64::INFINITY);
+        eprintln!(
+            "{what}: {lit} of {total} pixels differ from the background; PSNR against tessera render {p_render:.2} dB, against the page's canvas {p_canvas:.2} dB"
+        );
+        assert!(
+            lit * 10 > total,
+            "{what}: blank or nearly ({lit} of {total} pixels drawn)"
+        );
+        assert!(
+            p_render >= MIN_PSNR_DB,
+            "{what}: {p_render:.2} dB against tessera render"
+        );
+        assert!(
+            p_canvas >= MIN_PSNR_DB,
+            "{what}: {p_canvas:.2} dB against the page's canvas"
+        );
+    }
+    // For the record (not asserted: it is the browser's behaviour, not ours): the canvas
+    // read by a plain toBlob in a later task than its frame.
+    if let Ok(img) = Image::load_png(&naive_shot) {
+        let drawn = img
+            .rgba
+            .chunks_exact(4)
+            .filter(|p| p[..3].iter().any(|&c| c > 8))
+            .count();
+        eprintln!(
+            "a plain canvas.toBlob 200 ms after the frame: {drawn} of {} pixels not black",
+            img.width * img.height
+        );
+    }
     // The paged model: read in several steps, the same picture.
     let p = &by("paged")["stats"];
     let index_bytes = p["index_bytes"].as_u64().unwrap();

@@ -57,7 +57,7 @@ mod navigator;
 mod up;
 
 pub use aabb::Aabb;
-pub use frame::{clip_planes, frame, FrameError, FrameTarget, MIN_NEAR_RATIO};
+pub use frame::{clip_planes, frame, point_at_depth, FrameError, FrameTarget, MIN_NEAR_RATIO};
 pub use navigator::{
     FlyInput, Mode, Navigator, DEFAULT_AUTO_ROTATE_DEG_S, DEFAULT_FOV_Y_DEG, FLY_FAST_FACTOR,
     FLY_SPEED_PER_SCALE, HOME_AZIMUTH_DEG, HOME_ELEVATION_DEG, HOME_MARGIN, INERTIA_START_PX_S,

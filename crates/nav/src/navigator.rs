@@ -631,15 +631,34 @@ impl Navigator {
         if !steps.is_finite() || steps == 0.0 {
             return;
         }
-        self.cancel_transition();
-        self.at_home = false;
-        let eye = self.pose.eye();
-        let forward = self.pose.forward();
-        let anchor = toward.filter(|p| p.is_finite() && (*p - eye).dot(forward) > 0.0);
+        let anchor = self.begin_zoom(toward);
         let pending = self.zoom.map_or(0.0, |z| z.log);
         let (lo, hi) = self.zoom_bounds(anchor);
         let log = (pending + steps * ZOOM_STEP_FACTOR.ln()).clamp(lo, hi);
         self.zoom = (log != 0.0).then_some(Zoom { log, anchor });
+    }
+
+    /// Pinch (two fingers): the fingers' spread grew by `scale` (> 1 zooms in), applied
+    /// at once so the model follows the fingers: the same scaling as [`Navigator::zoom`]
+    /// (about `toward` when it is in front of the eye, else toward the pivot; the same
+    /// limits), by a distance factor of `1 / scale`, without smoothing. A wheel zoom
+    /// still pending keeps going.
+    pub fn pinch(&mut self, scale: f64, toward: Option<DVec3>) {
+        if !(scale.is_finite() && scale > 0.0) || scale == 1.0 {
+            return;
+        }
+        let anchor = self.begin_zoom(toward);
+        let (lo, hi) = self.zoom_bounds(anchor);
+        self.apply_zoom((-scale.ln()).clamp(lo, hi), anchor);
+    }
+
+    /// A zoom starts: any transition stops, the view leaves home, and the anchor is
+    /// `toward` when it lies in front of the eye (else None: toward the pivot).
+    fn begin_zoom(&mut self, toward: Option<DVec3>) -> Option<DVec3> {
+        self.cancel_transition();
+        self.at_home = false;
+        let (eye, forward) = (self.pose.eye(), self.pose.forward());
+        toward.filter(|p| p.is_finite() && (*p - eye).dot(forward) > 0.0)
     }
 
     /// Double-click on a picked point: the pivot moves to `p` in an animation

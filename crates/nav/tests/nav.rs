@@ -1033,3 +1033,62 @@ fn ndc_helpers_agree() {
         assert!((x - xf).abs() < 1e-4 && (y - yf).abs() < 1e-4);
     }
 }
+
+#[test]
+fn pinch_scales_at_once_about_the_point_or_the_pivot() {
+    let mut nav = Navigator::new(statue(), UpAxis::PosZ, 1280, 720);
+    let pivot = nav.pivot();
+    let d0 = nav.distance();
+    let f0 = nav.forward();
+    // Fingers twice as far apart: half the distance, at once, toward the pivot.
+    nav.pinch(2.0, None);
+    assert!((nav.distance() / d0 - 0.5).abs() < 1e-12);
+    assert_eq!(nav.pivot(), pivot);
+    assert_eq!(nav.forward(), f0);
+    assert!(!nav.is_moving());
+    nav.pinch(0.5, None);
+    assert!((nav.distance() / d0 - 1.0).abs() < 1e-12);
+    // About a point: it stays under the same pixel, its distance scaled by 1 / scale.
+    let p = v(101.0, 200.0, 7.5);
+    let px0 = pixel(&nav.camera(), p);
+    let dp0 = (p - nav.eye()).length();
+    nav.pinch(1.25, Some(p));
+    assert!(((p - nav.eye()).length() / dp0 - 0.8).abs() < 1e-9);
+    assert!((pixel(&nav.camera(), p) - px0).length() < 1e-6);
+    // The same limits as the wheel: never closer than min_distance to the point.
+    nav.set_min_distance(1e-3);
+    nav.pinch(1e12, Some(p));
+    let dp = (p - nav.eye()).length();
+    assert!((1e-3 * (1.0 - 1e-9)..1e-2).contains(&dp), "{dp}");
+    // Nonsense is ignored.
+    let cam = nav.camera();
+    for s in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+        nav.pinch(s, None);
+    }
+    assert_eq!(nav.camera(), cam);
+}
+
+#[test]
+fn point_at_depth_inverts_the_reversed_z_projection() {
+    use tessera_nav::point_at_depth;
+    let nav = Navigator::new(statue(), UpAxis::PosZ, 640, 480);
+    let cam = nav.camera();
+    let (near, far) = (0.5, 4000.0);
+    // A point on the ray through the centre of pixel (37, 81), 123.4 units deep.
+    let b = cam.basis();
+    let tan_y = (0.5 * cam.fov_y_rad()).tan();
+    let (nx, ny) = (37.5 / 640.0 * 2.0 - 1.0, 1.0 - 81.5 / 480.0 * 2.0);
+    let dir = b.forward + b.right * (nx * tan_y * cam.aspect()) + b.up * (ny * tan_y);
+    let z = 123.4;
+    let p = DVec3::from(cam.position) + dir * z;
+    // Its depth through the renderer's projection (near and far swapped: reversed Z).
+    let proj = cam.projection_matrix(far as f32, near as f32);
+    let clip = proj * glam::Vec4::new(0.0, 0.0, -z as f32, 1.0);
+    let depth = clip.z / clip.w;
+    assert!(depth > 0.0 && depth < 1.0, "{depth}");
+    let q = point_at_depth(&cam, 37.9, 81.2, depth, (near, far)).unwrap();
+    assert!((q - p).length() < 1e-5 * z, "{q} vs {p}");
+    assert_eq!(point_at_depth(&cam, 37.0, 81.0, 0.0, (near, far)), None);
+    assert_eq!(point_at_depth(&cam, 640.0, 81.0, depth, (near, far)), None);
+    assert_eq!(point_at_depth(&cam, -1.0, 81.0, depth, (near, far)), None);
+}

@@ -12,6 +12,9 @@
 //!   errors worded for the page (404, no range support, CORS, model changed).
 //! - `viewer` (wasm32): `Viewer`, the wasm-bindgen class: open (device, first 64 KiB,
 //!   top of the index, roots), `frame` (navigation, scheduler, draw), input, camera.
+//! - `pick` (wasm32): the depth under a pixel of the last frame read back on WebGL2
+//!   (a one-pixel pass packing the depth's bits into RGBA8), for zoom to the cursor,
+//!   double-click recentre and pinch about the fingers.
 //!
 //! Decoding runs on the main thread between frames in this first step (at most
 //! 6 ms of it per frame; the cost per patch is in the frame statistics); fetching is
@@ -21,6 +24,8 @@ pub mod plan;
 
 #[cfg(target_arch = "wasm32")]
 mod http;
+#[cfg(target_arch = "wasm32")]
+mod pick;
 #[cfg(target_arch = "wasm32")]
 mod viewer;
 

@@ -1,9 +1,14 @@
 //! The browser viewer: one model from a URL, drawn into a canvas with WebGL2 through
 //! wgpu, by the same code as the desktop (see the crate docs). JavaScript owns the
 //! frame loop (`requestAnimationFrame` calls [`Viewer::frame`]) and the DOM events
-//! (forwarded to [`Viewer::pointer_down`] and friends, in canvas pixels).
+//! (forwarded to [`Viewer::pointer_down`] and friends, in canvas pixels; touch gestures
+//! arrive as drags and [`Viewer::pinch`]). The wheel, double-click and pinch act about
+//! the point drawn under the cursor: the depth of the last frame read back
+//! (`crate::pick`) and unprojected, then the desktop's `Navigator` calls (`zoom`
+//! toward it, `recentre` on it, `pinch` about it).
 
 use std::cell::{Cell, RefCell};
+use std::collections::VecDeque;
 use std::rc::Rc;
 use std::sync::Arc;
 
@@ -18,6 +23,7 @@ use wasm_bindgen::prelude::*;
 use wasm_bindgen_futures::spawn_local;
 
 use crate::http::{Http, HttpError};
+use crate::pick::DepthPicker;
 use crate::plan::{Attempt, Fetcher, SparseBytes, PREFIX_BYTES};
 
 /// Most time one frame spends decoding fetched patches (main thread), milliseconds.
@@ -141,6 +147,34 @@ impl PatchSource for Remote {
     }
 }
 
+/// What a depth pick (the point drawn under a pixel) is for.
+#[derive(Clone, Copy, Debug)]
+enum Purpose {
+    /// Wheel steps, zoomed toward the point (toward the pivot over the background).
+    Zoom(f64),
+    /// Double-click: the pivot moves to the point.
+    Recentre,
+    /// The point a pinch zooms about (taken once, when the pinch starts).
+    Pinch,
+    /// Asked by the page (`point_at`); answered in the frame statistics.
+    Query(u32),
+}
+
+#[derive(Clone, Copy, Debug)]
+struct PickRequest {
+    x: f64,
+    y: f64,
+    purpose: Purpose,
+}
+
+/// A pinch in progress: waiting for its point (the spread so far accumulated), or
+/// zooming about it (None: the background, toward the pivot).
+#[derive(Clone, Copy, Debug)]
+enum Pinch {
+    Waiting(f64),
+    About(Option<DVec3>),
+}
+
 /// A view of one remote model in a canvas. See the module docs.
 #[wasm_bindgen]
 pub struct Viewer {
@@ -175,6 +209,15 @@ pub struct Viewer {
     converged_ms: Option<f64>,
     index_bytes: u64,
     frames: u64,
+    /// Depth picks: the reader, the requests waiting for it, the one in flight (with
+    /// the camera and planes of the frame it reads), answers for the page.
+    picker: DepthPicker,
+    picks: VecDeque<PickRequest>,
+    pick_in_flight: Option<(PickRequest, Camera, (f64, f64))>,
+    answers: Vec<Value>,
+    pinch: Option<Pinch>,
+    /// The camera and near/far planes of the frame the depth texture holds.
+    drawn: Option<(Camera, (f64, f64))>,
 }
 
 impl Drop for Viewer {
@@ -197,7 +240,8 @@ fn depth_view(device: &wgpu::Device, w: u32, h: u32) -> wgpu::TextureView {
             sample_count: 1,
             dimension: wgpu::TextureDimension::D2,
             format: tessera_render::DEPTH_FORMAT,
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
+            // Sampled by the depth pick (crate::pick).
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
             view_formats: &[],
         })
         .create_view(&Default::default())
@@ -380,6 +424,7 @@ impl Viewer {
             scheduler.load_roots(&mut source, &mut store);
         }
         let depth = depth_view(&gpu.device, w, h);
+        let picker = DepthPicker::new(&gpu.device);
         Ok(Viewer {
             gpu,
             surface,
@@ -408,6 +453,12 @@ impl Viewer {
             converged_ms: None,
             index_bytes,
             frames: 0,
+            picker,
+            picks: VecDeque::new(),
+            pick_in_flight: None,
+            answers: Vec::new(),
+            pinch: None,
+            drawn: None,
         })
     }
 
@@ -421,6 +472,9 @@ impl Viewer {
         }
         let dt = self.last_ms.map_or(0.0, |t| ((time_ms - t) / 1e3).max(0.0));
         self.last_ms = Some(time_ms);
+        // Depth picks answered since the last frame act now (zoom, recentre, pinch),
+        // before the navigation moves; the next one reads the frame last drawn.
+        self.poll_picks();
         let moving = self.nav.needs_update() || self.drag.is_some();
         self.nav.update(dt);
         // A paged index read further: select over more of it.
@@ -451,6 +505,7 @@ impl Viewer {
             _ => {}
         }
         let idle = self.converged && !moving && !self.dirty;
+        let mut drew = false;
         if !idle {
             let camera = self.nav.camera();
             let mut store = GpuStore {
@@ -470,12 +525,14 @@ impl Viewer {
             {
                 self.grow_index();
             }
-            self.draw(&camera);
+            self.dirty = false;
+            // A frame the canvas could not take (resized, lost) is drawn again next time.
+            drew = self.draw(&camera);
+            self.dirty |= !drew;
             self.frames += 1;
             if self.first_frame_ms.is_none() && self.stats.selected_nodes > 0 {
                 self.first_frame_ms = Some(now_ms() - self.opened_ms);
             }
-            self.dirty = false;
         }
         let fetch = self.source.fetcher.borrow();
         let converged = self.stats.pending_loads == 0
@@ -487,6 +544,8 @@ impl Viewer {
             && !self.growing.get()
             && !self.nav.needs_update()
             && self.drag.is_none()
+            && self.picks.is_empty()
+            && self.pick_in_flight.is_none()
             && self.first_frame_ms.is_some();
         self.converged = converged;
         if converged && self.converged_ms.is_none() {
@@ -496,7 +555,8 @@ impl Viewer {
         let s = &self.stats;
         Ok(json!({
             "idle": converged,
-            "drew": !idle,
+            // Whether this call drew the canvas (a screenshot reads it right after).
+            "drew": drew,
             "frame": self.frames,
             "nodes": s.selected_nodes,
             "triangles": s.triangles,
@@ -521,23 +581,23 @@ impl Viewer {
             "first_frame_ms": self.first_frame_ms,
             "converged_ms": self.converged_ms,
             "adapter": self.gpu.adapter_label,
+            "pivot": self.nav.pivot().to_array(),
+            // Answers to point_at: [{"id", "point": [x, y, z] or null}].
+            "picks": std::mem::take(&mut self.answers),
         })
         .to_string())
     }
 
-    fn draw(&mut self, camera: &Camera) {
+    /// Draws and presents the frame; false when the canvas gave no texture.
+    fn draw(&mut self, camera: &Camera) -> bool {
         let frame = match self.surface.get_current_texture() {
             wgpu::CurrentSurfaceTexture::Success(t)
             | wgpu::CurrentSurfaceTexture::Suboptimal(t) => t,
             wgpu::CurrentSurfaceTexture::Outdated | wgpu::CurrentSurfaceTexture::Lost => {
                 self.surface.configure(&self.gpu.device, &self.config);
-                self.dirty = true;
-                return;
+                return false;
             }
-            _ => {
-                self.dirty = true;
-                return;
-            }
+            _ => return false,
         };
         let view = frame.texture.create_view(&Default::default());
         // Near and far fitted to the drawn nodes' tight spheres, as the desktop viewer.
@@ -556,6 +616,7 @@ impl Viewer {
             camera.basis().forward,
             spheres,
         );
+        self.drawn = Some((camera.clone(), planes));
         let params = FrameParams::with_planes(
             camera,
             self.index.header().cube_origin,
@@ -572,15 +633,21 @@ impl Viewer {
             });
         let cache = &self.cache;
         let ratios = self.scheduler.morph_ratios();
-        let slots = self.scheduler.draw().iter().enumerate().filter_map(|(k, &n)| {
-            let r = ratios.get(k).copied().unwrap_or(0.0);
-            cache.slot(n).map(|s| (s, r))
-        });
+        let slots = self
+            .scheduler
+            .draw()
+            .iter()
+            .enumerate()
+            .filter_map(|(k, &n)| {
+                let r = ratios.get(k).copied().unwrap_or(0.0);
+                cache.slot(n).map(|s| (s, r))
+            });
         let device = &self.gpu.device;
         self.renderer
             .encode_pass(device, &mut enc, &view, &self.depth, cache, slots, true);
         self.gpu.queue.submit([enc.finish()]);
         self.gpu.queue.present(frame);
+        true
     }
 
     /// Reads more of the paged index (doubling the pages read), off the frame.
@@ -624,6 +691,8 @@ impl Viewer {
         self.config.height = h;
         self.surface.configure(&self.gpu.device, &self.config);
         self.depth = depth_view(&self.gpu.device, w, h);
+        // The new depth texture holds no frame yet.
+        self.drawn = None;
         self.nav.resize(w, h);
         self.dirty = true;
     }
@@ -642,6 +711,12 @@ impl Viewer {
         self.nav.resize(self.config.width, self.config.height);
         self.dirty = true;
         Ok(())
+    }
+
+    /// Draws the next frame even when nothing changed (a screenshot reads the canvas
+    /// right after that frame: a WebGL canvas is cleared once it has been shown).
+    pub fn redraw(&mut self) {
+        self.dirty = true;
     }
 
     /// Back to the home view.
@@ -685,9 +760,138 @@ impl Viewer {
         }
     }
 
-    /// Wheel steps (positive zooms in), toward the pivot.
-    pub fn wheel(&mut self, steps: f64) {
-        self.nav.zoom(steps, None);
+    /// Two fingers' spread grew by `scale` (> 1 zooms in) around their centre
+    /// (`x`, `y`) canvas pixels: [`Navigator::pinch`], at once, about the point drawn
+    /// under the centre where the pinch started (picked once; the spread waits for it;
+    /// the background: toward the pivot). [`Viewer::pinch_end`] ends the pinch.
+    pub fn pinch(&mut self, scale: f64, x: f64, y: f64) {
+        if !(scale.is_finite() && scale > 0.0) {
+            return;
+        }
+        match &mut self.pinch {
+            None => {
+                self.pinch = Some(Pinch::Waiting(scale));
+                self.request_pick(x, y, Purpose::Pinch);
+            }
+            Some(Pinch::Waiting(s)) => *s *= scale,
+            Some(Pinch::About(p)) => self.nav.pinch(scale, *p),
+        }
+        self.dirty = true;
+    }
+
+    /// The fingers of a pinch left (or became one): the next pinch picks its point anew.
+    pub fn pinch_end(&mut self) {
+        if let Some(Pinch::Waiting(s)) = self.pinch.take() {
+            // Its point never came: what the fingers did still counts.
+            self.nav.pinch(s, None);
+        }
+        self.dirty = true;
+    }
+
+    /// Wheel steps (positive zooms in) with the cursor at (`x`, `y`) canvas pixels:
+    /// toward the point drawn there, as the desktop (the depth under the cursor; the
+    /// background: toward the pivot). The zoom starts when the depth has been read (a
+    /// frame or two); steps at the same pixel meanwhile add up.
+    pub fn wheel(&mut self, steps: f64, x: f64, y: f64) {
+        if !steps.is_finite() || steps == 0.0 {
+            return;
+        }
+        if let Some(PickRequest {
+            x: px,
+            y: py,
+            purpose: Purpose::Zoom(s),
+        }) = self.picks.back_mut()
+        {
+            if (*px - x).abs() + (*py - y).abs() < 2.0 {
+                *s += steps;
+                return;
+            }
+        }
+        self.request_pick(x, y, Purpose::Zoom(steps));
+        self.dirty = true;
+    }
+
+    /// Double-click at (`x`, `y`) canvas pixels: the pivot moves to the point drawn
+    /// there ([`Navigator::recentre`]: animated, the orientation kept); nothing over the
+    /// background.
+    pub fn recentre_at(&mut self, x: f64, y: f64) {
+        self.request_pick(x, y, Purpose::Recentre);
+        self.dirty = true;
+    }
+
+    /// Asks for the point drawn under (`x`, `y`) canvas pixels (the depth of the last
+    /// frame, unprojected: the drawn cut's surface, model coordinates). The answer comes
+    /// in a later frame's statistics, `picks`: `{"id": id, "point": [x, y, z] or null}`.
+    pub fn point_at(&mut self, id: u32, x: f64, y: f64) {
+        self.request_pick(x, y, Purpose::Query(id));
+        self.dirty = true;
+    }
+
+    fn request_pick(&mut self, x: f64, y: f64, purpose: Purpose) {
+        self.picks.push_back(PickRequest { x, y, purpose });
+        self.start_pick();
+    }
+
+    /// Starts the next waiting pick when none is in flight (over the frame last drawn;
+    /// none drawn yet: it is answered with nothing).
+    fn start_pick(&mut self) {
+        while self.pick_in_flight.is_none() {
+            let Some(req) = self.picks.pop_front() else {
+                return;
+            };
+            let (w, h) = (self.config.width, self.config.height);
+            let inside =
+                req.x >= 0.0 && req.y >= 0.0 && req.x < f64::from(w) && req.y < f64::from(h);
+            match self.drawn.clone() {
+                Some((camera, planes)) if inside => {
+                    let started = self.picker.start(
+                        &self.gpu.device,
+                        &self.gpu.queue,
+                        &self.depth,
+                        w,
+                        h,
+                        req.x as u32,
+                        req.y as u32,
+                    );
+                    debug_assert!(started);
+                    self.pick_in_flight = Some((req, camera, planes));
+                }
+                _ => self.picked(req, None),
+            }
+        }
+    }
+
+    /// Takes the answer of the pick in flight (if it came) and starts the next.
+    fn poll_picks(&mut self) {
+        if let Some(answer) = self.picker.poll(&self.gpu.device) {
+            if let Some((req, camera, planes)) = self.pick_in_flight.take() {
+                let point = answer
+                    .and_then(|d| tessera_nav::point_at_depth(&camera, req.x, req.y, d, planes));
+                self.picked(req, point);
+            }
+        }
+        self.start_pick();
+    }
+
+    fn picked(&mut self, req: PickRequest, point: Option<DVec3>) {
+        match req.purpose {
+            Purpose::Zoom(steps) => self.nav.zoom(steps, point),
+            Purpose::Recentre => {
+                if let Some(p) = point {
+                    self.nav.recentre(p);
+                }
+            }
+            Purpose::Pinch => {
+                if let Some(Pinch::Waiting(s)) = self.pinch {
+                    self.nav.pinch(s, point);
+                    self.pinch = Some(Pinch::About(point));
+                }
+            }
+            Purpose::Query(id) => self.answers.push(json!({
+                "id": id,
+                "point": point.map(|p| p.to_array()),
+            })),
+        }
         self.dirty = true;
     }
 }
