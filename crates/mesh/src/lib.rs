@@ -12,6 +12,7 @@ mod error;
 #[doc(hidden)]
 pub mod fuzzing;
 mod gltf_import;
+mod mtl;
 mod obj;
 mod ply_read;
 mod ply_write;

@@ -15,6 +15,14 @@
 //!   separate indexing makes that unavoidable without a second, random-access pass.
 //!
 //! Vertex colours follow the common `v x y z r g b` extension (floats in 0..1).
+//!
+//! Materials: the libraries named by `mtllib` lines met before the first face with
+//! texture coordinates or normals (where the first pass may stop; exporters write them
+//! at the top) are read ([`crate::mtl`]). When a material has a diffuse colour `Kd`
+//! other than white, faces take their `usemtl` material's `Kd` (times the vertex colour):
+//! the reader then works in combined mode with the material in each combination, so a
+//! position shared by two materials becomes two vertices. Textures (`map_Kd`) are not
+//! carried yet (named in a warning); a missing library or image is a warning.
 
 use std::collections::HashMap;
 use std::fs::File;
@@ -22,6 +30,7 @@ use std::io::Read;
 use std::path::Path;
 
 use crate::common::{finish_report, note_ignored, PolygonEmitter};
+use crate::mtl::{Library, Material};
 use crate::source::{ReadErr, Source};
 use crate::{Attributes, ImportReport, MeshError, MeshHeader, MeshVisitor, Vertex};
 
@@ -50,9 +59,12 @@ pub(crate) fn read_obj_from<R: Read>(
     visitor: &mut dyn MeshVisitor,
 ) -> Result<ImportReport, MeshError> {
     let scan = prescan(path, open()?)?;
+    let mut report = ImportReport::default();
+    let library = Library::load(path, &scan.mtllibs, &mut report);
+    let material_colors = library.materials.values().any(|m| !m.is_white());
     let attributes = Attributes {
         normals: scan.uses_vn,
-        colors: scan.colors,
+        colors: scan.colors || material_colors,
         uvs: scan.uses_vt,
     };
     visitor.header(&MeshHeader {
@@ -60,7 +72,12 @@ pub(crate) fn read_obj_from<R: Read>(
         vertex_count: None,
         face_count: None,
     })?;
-    let mut reader = ObjReader::new(path, attributes, scan.uses_vt || scan.uses_vn);
+    let combined = scan.uses_vt || scan.uses_vn || material_colors;
+    let mut reader = ObjReader::new(path, combined);
+    reader.report = report;
+    reader.vertex_colors = scan.colors;
+    reader.library = library;
+    reader.material_colors = material_colors;
     let mut src = Source::new(open()?);
     let mut line = Vec::new();
     let mut last_statement = false;
@@ -71,6 +88,22 @@ pub(crate) fn read_obj_from<R: Read>(
     // A last statement the file ends inside may have been cut short ("f 55 64 6" of
     // "f 55 64 65"): it reads as valid, so say so.
     reader.report.unterminated_last_line = src.unterminated && last_statement;
+    reader
+        .library
+        .warn_textures(path, &reader.used_materials, &mut reader.report);
+    if !reader.report.unknown_materials.is_empty() {
+        let names: Vec<String> = reader
+            .report
+            .unknown_materials
+            .iter()
+            .map(|(n, c)| format!("{n} ({c})"))
+            .collect();
+        tracing::warn!(
+            "{}: usemtl names no material library defines (drawn white): {}",
+            path.display(),
+            names.join(", ")
+        );
+    }
     finish_report(path, reader.report)
 }
 
@@ -91,6 +124,8 @@ struct Scan {
     uses_vn: bool,
     /// The first `v` statement carries a colour.
     colors: bool,
+    /// The `mtllib` lines seen (the rest of each line).
+    mtllibs: Vec<String>,
 }
 
 /// Look at line prefixes only; stop as soon as faces are known to use both vt and vn.
@@ -107,6 +142,14 @@ fn prescan<R: Read>(path: &Path, reader: R) -> Result<Scan, MeshError> {
             return Ok(scan);
         }
         match line.trim_ascii_start() {
+            [b'm', b't', b'l', b'l', b'i', b'b', b' ' | b'\t', rest @ ..] => {
+                let name = String::from_utf8_lossy(strip_comment(rest))
+                    .trim()
+                    .to_string();
+                if !name.is_empty() {
+                    scan.mtllibs.push(name);
+                }
+            }
             [b'v', b' ' | b'\t', rest @ ..] if !seen_v => {
                 seen_v = true;
                 scan.colors = words(strip_comment(rest)).count() >= 6;
@@ -166,13 +209,12 @@ struct Combined {
     colors: Vec<[u8; 4]>,
     uvs: Vec<[f32; 2]>,
     normals: Vec<[f32; 3]>,
-    /// (v, vt, vn) 0-based, `NONE` when absent → output vertex index.
-    map: HashMap<[u32; 3], u32>,
+    /// (v, vt, vn, material) 0-based, `NONE` when absent → output vertex index.
+    map: HashMap<[u32; 4], u32>,
 }
 
 struct ObjReader<'p> {
     path: &'p Path,
-    attributes: Attributes,
     /// 1-based number of the current line.
     line_no: u64,
     v_count: u64,
@@ -185,13 +227,23 @@ struct ObjReader<'p> {
     corners: Vec<u32>,
     emitter: PolygonEmitter,
     report: ImportReport,
+    /// `v` statements carry colours.
+    vertex_colors: bool,
+    library: Library,
+    /// Materials colour the faces (some `Kd` is not white).
+    material_colors: bool,
+    /// The materials of the `usemtl` names met, by index; the current one.
+    materials: Vec<Material>,
+    material_index: HashMap<String, u32>,
+    current_material: u32,
+    /// Names of the materials `usemtl` chose, in order of first use.
+    used_materials: Vec<String>,
 }
 
 impl<'p> ObjReader<'p> {
-    fn new(path: &'p Path, attributes: Attributes, combined: bool) -> Self {
+    fn new(path: &'p Path, combined: bool) -> Self {
         ObjReader {
             path,
-            attributes,
             line_no: 0,
             v_count: 0,
             vt_count: 0,
@@ -201,6 +253,13 @@ impl<'p> ObjReader<'p> {
             corners: Vec::new(),
             emitter: PolygonEmitter::default(),
             report: ImportReport::default(),
+            vertex_colors: false,
+            library: Library::default(),
+            material_colors: false,
+            materials: Vec::new(),
+            material_index: HashMap::new(),
+            current_material: NONE,
+            used_materials: Vec::new(),
         }
     }
 
@@ -254,13 +313,40 @@ impl<'p> ObjReader<'p> {
             b"vn" => self.normal(w),
             b"f" | b"fo" => self.face(w, visitor),
             // Grouping, smoothing and materials: nothing of the geometry is lost.
-            b"o" | b"g" | b"s" | b"usemtl" | b"mtllib" => Ok(()),
+            b"o" | b"g" | b"s" | b"mtllib" => Ok(()),
+            b"usemtl" => {
+                self.use_material(line);
+                Ok(())
+            }
             // Everything else is counted and named in the import warning, including the
             // geometry a triangle mesh cannot hold: lines (`l`), points (`p`) and the
             // parameter-space vertices (`vp`) of free-form curves and surfaces.
             other => {
                 note_ignored(&mut self.report, &String::from_utf8_lossy(other), 1);
                 Ok(())
+            }
+        }
+    }
+
+    /// `usemtl NAME` (the rest of the line: names may hold spaces).
+    fn use_material(&mut self, line: &[u8]) {
+        let rest = line.trim_ascii();
+        let name = String::from_utf8_lossy(rest.get(6..).unwrap_or(&[]).trim_ascii()).into_owned();
+        if let Some(&i) = self.material_index.get(&name) {
+            self.current_material = i;
+            return;
+        }
+        match self.library.materials.get(&name) {
+            Some(m) => {
+                let i = self.materials.len() as u32;
+                self.materials.push(m.clone());
+                self.material_index.insert(name.clone(), i);
+                self.used_materials.push(name);
+                self.current_material = i;
+            }
+            None => {
+                *self.report.unknown_materials.entry(name).or_default() += 1;
+                self.current_material = NONE;
             }
         }
     }
@@ -323,7 +409,7 @@ impl<'p> ObjReader<'p> {
                 vertex: self.v_count,
             });
         }
-        let color = if n >= 6 && self.attributes.colors {
+        let color = if n >= 6 && self.vertex_colors {
             let alpha = if n >= 7 { vals[6] } else { 1.0 };
             [vals[3], vals[4], vals[5], alpha].map(|c| (c * 255.0).round() as u8)
         } else {
@@ -333,7 +419,7 @@ impl<'p> ObjReader<'p> {
         match &mut self.combined {
             Some(c) => {
                 c.positions.push(position);
-                if self.attributes.colors {
+                if self.vertex_colors {
                     c.colors.push(color);
                 }
                 Ok(())
@@ -481,7 +567,12 @@ impl<'p> ObjReader<'p> {
         let Some(c) = &self.combined else {
             return Ok(v);
         };
-        if let Some(&i) = c.map.get(&[v, vt, vn]) {
+        let material = if self.material_colors {
+            self.current_material
+        } else {
+            NONE
+        };
+        if let Some(&i) = c.map.get(&[v, vt, vn, material]) {
             return Ok(i);
         }
         // `resolve` checked every index against the table lengths.
@@ -493,12 +584,18 @@ impl<'p> ObjReader<'p> {
             } else {
                 get(&c.normals, vn)
             },
-            color: c.colors.get(v as usize).copied().unwrap_or([255; 4]),
+            color: {
+                let own = c.colors.get(v as usize).copied().unwrap_or([255; 4]);
+                match self.materials.get(material as usize) {
+                    Some(m) => m.tint(own),
+                    None => own,
+                }
+            },
             uv: c.uvs.get(vt as usize).copied().unwrap_or_default(),
         };
         let index = self.deliver(&vertex, visitor)?;
         if let Some(c) = &mut self.combined {
-            c.map.insert([v, vt, vn], index);
+            c.map.insert([v, vt, vn, material], index);
         }
         Ok(index)
     }

@@ -81,8 +81,13 @@ pub struct ImportReport {
     /// The text file ends inside its last line (no newline after it): if it was cut
     /// short there, that line's last number was read incomplete.
     pub unterminated_last_line: bool,
-    /// Textured materials whose images the build does not use yet (glTF), each as
-    /// `name (image 'x')`: they are drawn in their base colour factor (x vertex colour)
-    /// and their UVs are kept. Also logged once as a warning.
+    /// Textured materials whose images the build does not use yet (glTF, OBJ's
+    /// `map_Kd`), each as `name (image 'x')`: they are drawn in their base colour factor
+    /// or `Kd` (x vertex colour) and their UVs are kept. Also logged once as a warning.
     pub textures_not_used: Vec<String>,
+    /// Files the input refers to that could not be read (an OBJ's material libraries,
+    /// their texture images), as paths; each also a warning. The geometry is complete.
+    pub missing_files: Vec<String>,
+    /// OBJ `usemtl` names no material library defines (drawn white), with counts.
+    pub unknown_materials: BTreeMap<String, u64>,
 }

@@ -266,3 +266,82 @@ fn a_cut_last_statement_is_reported() {
     let (r, _) = read_ok("comment.obj", commented.as_bytes());
     assert!(!r.unterminated_last_line);
 }
+
+/// Reads `obj` written as `name` in a temp dir beside `others` (name, contents).
+fn read_with_files(
+    name: &str,
+    obj: &str,
+    others: &[(&str, &[u8])],
+) -> (tessera_mesh::ImportReport, Collect, tempfile::TempDir) {
+    let dir = tempfile::tempdir().unwrap();
+    for (n, b) in others {
+        std::fs::write(dir.path().join(n), b).unwrap();
+    }
+    let path = dir.path().join(name);
+    std::fs::write(&path, obj).unwrap();
+    let mut c = Collect::default();
+    let r = read_mesh(&path, &mut c).unwrap_or_else(|e| panic!("{name}: {e}"));
+    (r, c, dir)
+}
+
+/// Issue 11: faces take their material's diffuse colour `Kd` (times the vertex colour),
+/// from a library whose name holds a space; a position used by two materials becomes two
+/// vertices, one of each colour.
+#[test]
+fn mtl_kd_colours_the_faces_of_each_material() {
+    let mtl = "# two materials\nnewmtl red paint\nKd 1 0 0\n\nnewmtl grey\nKd 0.5\n";
+    let obj = "mtllib my materials.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n\
+               usemtl red paint\nf 1 2 3\nusemtl grey\nf 1 3 4\nusemtl red paint\nf 2 3 4\n";
+    let (r, c, _d) = read_with_files("m.obj", obj, &[("my materials.mtl", mtl.as_bytes())]);
+    assert!(c.headers[0].attributes.colors);
+    assert_eq!(c.triangles.len(), 3);
+    let color = |t: usize| c.triangles[t].map(|i| c.vertices[i as usize].color);
+    assert_eq!(color(0), [[255, 0, 0, 255]; 3]);
+    assert_eq!(color(1), [[128, 128, 128, 255]; 3]);
+    assert_eq!(color(2), [[255, 0, 0, 255]; 3]);
+    // Red uses all 4 positions, grey 3 of them: 7 vertices.
+    assert_eq!(c.vertices.len(), 7);
+    assert!(r.missing_files.is_empty() && r.textures_not_used.is_empty());
+    assert!(r.unknown_materials.is_empty());
+}
+
+/// A vertex colour is multiplied by its material's `Kd`; a white library changes nothing
+/// (and keeps the direct mode's one vertex per position).
+#[test]
+fn mtl_kd_tints_vertex_colours_and_white_materials_change_nothing() {
+    let mtl = "newmtl half\nKd 0.5 0.5 0.5\n";
+    let obj = "mtllib m.mtl\nv 0 0 0 1 0 0\nv 1 0 0 0 1 0\nv 0 1 0 0 0 1\nusemtl half\nf 1 2 3\n";
+    let (_, c, _d) = read_with_files("t.obj", obj, &[("m.mtl", mtl.as_bytes())]);
+    assert_eq!(c.vertices[0].color, [128, 0, 0, 255]);
+    assert_eq!(c.vertices[2].color, [0, 0, 128, 255]);
+    let white = "newmtl w\nKd 1 1 1\n";
+    let obj = "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl w\nf 1 2 3\n";
+    let (_, c, _d) = read_with_files("w.obj", obj, &[("m.mtl", white.as_bytes())]);
+    assert!(!c.headers[0].attributes.colors);
+    assert_eq!(c.vertices.len(), 3);
+}
+
+/// A missing library, a missing texture image and a `usemtl` no library defines are
+/// warnings with what is missing named; the model is read whole.
+#[test]
+fn missing_materials_and_images_are_reported_and_the_model_kept() {
+    let mtl = "newmtl photo\nKd 0.8 0.8 0.8\nmap_Kd -s 1 1 1 images/my photo.jpg\n";
+    let obj = "mtllib gone.mtl\nmtllib here.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nvt 0 0\n\
+               vt 1 0\nvt 0 1\nusemtl photo\nf 1/1 2/2 3/3\nusemtl nosuch\nf 2/2 4/1 3/3\n";
+    let (r, c, d) = read_with_files("p.obj", obj, &[("here.mtl", mtl.as_bytes())]);
+    assert_eq!(c.triangles.len(), 2);
+    assert_eq!(r.textures_not_used, ["photo (image 'images/my photo.jpg')"]);
+    let gone = d.path().join("gone.mtl").display().to_string();
+    let image = d.path().join("images/my photo.jpg").display().to_string();
+    assert_eq!(r.missing_files, [gone, image]);
+    assert_eq!(r.unknown_materials.get("nosuch"), Some(&1));
+    // The textured material is drawn in its Kd; the unknown one white.
+    assert_eq!(
+        c.vertices[c.triangles[0][0] as usize].color,
+        [204, 204, 204, 255]
+    );
+    assert_eq!(
+        c.vertices[c.triangles[1][1] as usize].color,
+        [255, 255, 255, 255]
+    );
+}
