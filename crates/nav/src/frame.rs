@@ -291,32 +291,15 @@ pub fn clip_planes(
     (near, far)
 }
 
-/// The point drawn at pixel (`x`, `y`) (pixel units, top-left origin; the pixel's centre
-/// is taken) of a frame of `camera` whose reversed-Z depth buffer holds `depth` there
-/// (1 at `near`, 0 at `far`, as [`clip_planes`] and the renderer's projection make it),
-/// in model coordinates. None for the background (`depth <= 0`), a pixel outside the
-/// image or a non-finite input. The inverse of the reversed perspective projection:
-/// view depth `z = near * far / (depth * (far - near) + near)`, along the pixel's ray
-/// (the desktop viewer unprojects its depth buffer the same way).
+/// The point drawn at pixel (`x`, `y`) of a frame of `camera` whose reversed-Z depth
+/// buffer holds `depth` there: [`Camera::point_at_depth`] (one formula for the desktop
+/// and the browser).
 pub fn point_at_depth(
     camera: &Camera,
     x: f64,
     y: f64,
     depth: f32,
-    (near, far): (f64, f64),
+    planes: (f64, f64),
 ) -> Option<DVec3> {
-    let d = f64::from(depth);
-    if !(d > 0.0 && d.is_finite() && near > 0.0 && far > near)
-        || !(x >= 0.0 && y >= 0.0 && x < f64::from(camera.width) && y < f64::from(camera.height))
-    {
-        return None;
-    }
-    let z = near * far / (d * (far - near) + near);
-    let b = camera.basis();
-    let tan_y = (0.5 * camera.fov_y_rad()).tan();
-    let ndc_x = (x.floor() + 0.5) / f64::from(camera.width) * 2.0 - 1.0;
-    let ndc_y = 1.0 - (y.floor() + 0.5) / f64::from(camera.height) * 2.0;
-    let dir = b.forward + b.right * (ndc_x * tan_y * camera.aspect()) + b.up * (ndc_y * tan_y);
-    let p = DVec3::from(camera.position) + dir * z;
-    p.is_finite().then_some(p)
+    camera.point_at_depth(x, y, depth, planes)
 }

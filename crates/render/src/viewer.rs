@@ -560,21 +560,10 @@ impl Viewer {
         else {
             return Ok(None);
         };
-        if d <= 0.0 {
-            return Ok(None);
-        }
-        // Reversed Z of a perspective projection: depth = near / z_view (near at 1,
-        // infinity at 0, exactly so when far >> near; with a finite far the correction
-        // below inverts the same formula the projection uses).
-        let (near, far) = self.planes;
-        let z = near * far / (f64::from(d) * (far - near) + near);
-        let b = cam.basis();
-        let tan_y = (0.5 * cam.fov_y_rad()).tan();
-        let ndc_x = (x + 0.5) / f64::from(cam.width) * 2.0 - 1.0;
-        let ndc_y = 1.0 - (y + 0.5) / f64::from(cam.height) * 2.0;
-        let dir = b.forward + b.right * (ndc_x * tan_y * cam.aspect()) + b.up * (ndc_y * tan_y);
-        let p = DVec3::from(cam.position) + dir * z;
-        Ok(Some(p.to_array()))
+        // Reversed Z, unprojected at the pixel's centre (the pixel read).
+        Ok(cam
+            .point_at_depth(x, y, d, self.planes)
+            .map(|p| p.to_array()))
     }
 
     /// The offscreen colour target of the last frame (a window blits it).

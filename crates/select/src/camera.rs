@@ -498,6 +498,37 @@ impl Camera {
         f64::from(self.height) / (2.0 * (0.5 * self.fov_y_rad()).tan())
     }
 
+    /// The point drawn at pixel (`x`, `y`) (pixel units, top-left origin; the pixel's
+    /// centre is taken) of a frame of this camera whose reversed-Z depth buffer holds
+    /// `depth` there (1 at `near`, 0 at `far`, as the renderer's projection makes it), in
+    /// model coordinates. None for the background (`depth <= 0`), a pixel outside the
+    /// image or a non-finite input. The inverse of the reversed perspective projection:
+    /// view depth `z = near * far / (depth * (far - near) + near)`, along the pixel's
+    /// ray. One formula for every front end: the desktop viewer's depth readback and the
+    /// browser's one-pixel pick both unproject through it.
+    pub fn point_at_depth(
+        &self,
+        x: f64,
+        y: f64,
+        depth: f32,
+        (near, far): (f64, f64),
+    ) -> Option<DVec3> {
+        let d = f64::from(depth);
+        if !(d > 0.0 && d.is_finite() && near > 0.0 && far > near)
+            || !(x >= 0.0 && y >= 0.0 && x < f64::from(self.width) && y < f64::from(self.height))
+        {
+            return None;
+        }
+        let z = near * far / (d * (far - near) + near);
+        let b = self.basis();
+        let tan_y = (0.5 * self.fov_y_rad()).tan();
+        let ndc_x = (x.floor() + 0.5) / f64::from(self.width) * 2.0 - 1.0;
+        let ndc_y = 1.0 - (y.floor() + 0.5) / f64::from(self.height) * 2.0;
+        let dir = b.forward + b.right * (ndc_x * tan_y * self.aspect()) + b.up * (ndc_y * tan_y);
+        let p = dvec(self.position) + dir * z;
+        p.is_finite().then_some(p)
+    }
+
     /// The orthonormal view basis (model space).
     pub fn basis(&self) -> ViewBasis {
         let forward = (dvec(self.target) - dvec(self.position)).normalize();
