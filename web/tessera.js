@@ -6,6 +6,13 @@
 //   v.addEventListener('progress', (e) => console.log(e.detail.triangles));
 //   v.addEventListener('idle', () => ...);      // the view converged: nothing pending
 //   v.addEventListener('error', (e) => console.error(e.detail.message));
+//   v.addEventListener('networkerror', (e) => ...);  // requests failed: e.detail.message;
+//                   // what has loaded stays drawn, the requests are retried with backoff
+//   v.addEventListener('networkrestored', () => ...);  // data arrives again
+//   v.networkError;  // the message while requests fail, else null
+//   v.addEventListener('warning', (e) => ...);  // part of the model cannot be shown (a
+//                   // truncated file: e.detail.message); the rest is
+//   v.warning;      // that message, else null
 //   v.setCamera({ position, target, up, fov_y_deg, width, height });  // docs/camera.md
 //   v.camera();     // the current camera (sized as the canvas)
 //   await v.screenshot();  // a PNG Blob of the view at the canvas's pixel size
@@ -69,9 +76,16 @@ export class View extends EventTarget {
   // pointAt() calls waiting for their answer (id -> resolve).
   #pointQueries = new Map();
   #nextQuery = 1;
+  // Failed requests seen so far, and the network trouble going on (its message and
+  // the bytes received when it began: more arriving means the server is back).
+  #failedRequests = 0;
+  #network = null;
+  #warning = null;
+  #url;
 
-  constructor(viewer, canvas, autoResize) {
+  constructor(viewer, canvas, autoResize, url = '') {
     super();
+    this.#url = url;
     this.#viewer = viewer;
     this.#canvas = canvas;
     this.#bindInput();
@@ -85,6 +99,20 @@ export class View extends EventTarget {
   /** The last frame's statistics (see crates/web/src/viewer.rs `frame`), plus fps. */
   get stats() {
     return this.#stats;
+  }
+
+  /**
+   * While requests for the model fail (the server unreachable, the connection
+   * dropped): a message for the page; null otherwise. The view keeps what it has
+   * drawn and asks again with backoff ('networkerror' / 'networkrestored' events).
+   */
+  get networkError() {
+    return this.#network ? this.#network.message : null;
+  }
+
+  /** Why part of the model cannot be shown (a truncated file), or null. */
+  get warning() {
+    return this.#warning;
   }
 
   /** Whether the view has converged (nothing pending, nothing moving). */
@@ -174,6 +202,27 @@ export class View extends EventTarget {
       }, 'image/png');
     } catch (e) {
       for (const s of shots) s.reject(e);
+    }
+  }
+
+  // Requests that failed (network, server errors) are retried by the scheduler with
+  // backoff, the coarser nodes drawn meanwhile; the page is told, and told again when
+  // data arrives.
+  #watchNetwork(stats) {
+    const failed = stats.failed_requests || 0;
+    if (failed > this.#failedRequests) {
+      this.#failedRequests = failed;
+      const first = !this.#network;
+      this.#network = {
+        bytes: stats.bytes_received,
+        message:
+          `network error: ${failed} request${failed === 1 ? '' : 's'} for ${this.#url || 'the model'} failed ` +
+          '(the server is unreachable or dropped the connection); showing what has loaded, retrying',
+      };
+      if (first) this.dispatchEvent(new CustomEvent('networkerror', { detail: { message: this.#network.message, failedRequests: failed } }));
+    } else if (this.#network && stats.bytes_received > this.#network.bytes) {
+      this.#network = null;
+      this.dispatchEvent(new CustomEvent('networkrestored', { detail: stats }));
     }
   }
 
@@ -333,6 +382,11 @@ export class View extends EventTarget {
       if (resolve) resolve(point);
     }
     this.#stats = stats;
+    this.#watchNetwork(stats);
+    if (stats.warning && stats.warning !== this.#warning) {
+      this.#warning = stats.warning;
+      this.dispatchEvent(new CustomEvent('warning', { detail: { message: stats.warning } }));
+    }
     // Idle once two frames in a row have converged: the last one drawn is on screen.
     this.#convergedFrames = stats.idle ? this.#convergedFrames + 1 : 0;
     const idle = this.#convergedFrames >= 2;
@@ -378,7 +432,7 @@ export const Tessera = {
       camera: camera == null ? null : typeof camera === 'string' ? JSON.parse(camera) : camera,
     });
     const viewer = await Viewer.open(canvas, abs, options);
-    return new View(viewer, canvas, autoResize);
+    return new View(viewer, canvas, autoResize, abs);
   },
 };
 

@@ -7,8 +7,9 @@
 // PLAN: {"chromium": "/usr/bin/chromium", "visits": [{"name", "url", "expect": "idle" |
 // "error", "screenshot": "out.png" (optional, the canvas), "timeout_ms", "viewport":
 // [w, h]}]}. RESULTS: [{"name", "outcome": "idle" | "error" | "timeout", "ms" (from
-// navigation to the outcome), "error" (the page's message), "stats" (the viewer's last
-// frame statistics), "interaction" (with "drag": [dx, dy] in the visit: the cameras
+// navigation to the outcome), "error" (the page's message), "notice" (the page's notice
+// of a problem that does not stop the view, window.tesseraNotice), "stats" (the
+// viewer's last frame statistics), "interaction" (with "drag": [dx, dy] in the visit: the cameras
 // before and after a drag and a wheel step, ms to idle again, the address's hash),
 // "console" (messages and page errors), "shot" (with "api_shot": PATH: the view's
 // screenshot() Blob written there, its type and size; with "download": PATH: the HUD's
@@ -20,6 +21,21 @@
 // ...]} in canvas pixels: pointAt of the centre, then a double-click there and the
 // camera once idle again; then the first "off" pixel with a point under it, a wheel
 // step there, the cameras before and after and pointAt of that pixel after)}].
+// "cycles" (with "cycles": {"count", "model", "size": [w, h], "gc" (default true: collect
+// and measure after every cycle, not only the last), "keep" (the negative control: the
+// disposed canvases kept referenced)} on a page that runs nothing
+// itself, web/tests/blank.html: `count` times a new canvas, Tessera.view on it, wait for
+// its first drawn frame and convergence, the canvas's event listeners counted (CDP
+// DOMDebugger.getEventListeners), dispose(), the listeners counted again, the canvas
+// removed, the requestAnimationFrame calls counted over 150 ms, garbage collected (CDP
+// HeapProfiler.collectGarbage) and the JS heap (Runtime.getHeapUsage), the wasm
+// memory and the WebGL contexts made so far that are neither lost nor collected
+// counted; per cycle in "per_cycle", and the rAF calls over 1 s after the last),
+// "drop" (with "drop": {"control": URL, "shot": PATH}: once the first frame is drawn,
+// GET URL/drop (the test's proxy cuts every connection, mid-response, and refuses new
+// ones), wait up to 15 s for the page's notice (window.tesseraNotice), its state and a
+// canvas screenshot to PATH, then GET URL/restore and wait for idle: "dropped" and
+// "restored" states).
 // Exit 0 when every visit ran (whatever its outcome), 2 on a driver failure.
 
 import { readFileSync, writeFileSync } from 'node:fs';
@@ -77,6 +93,29 @@ for (const visit of plan.visits) {
     acceptDownloads: true,
     hasTouch: !!visit.touch,
   });
+  if (visit.cycles) {
+    // Before any page script: count the WebGL contexts made (weakly held, so a context
+    // the page lets go of can be collected) and the requestAnimationFrame calls.
+    await context.addInitScript(() => {
+      const seen = new WeakSet();
+      window.__glContexts = [];
+      const getContext = HTMLCanvasElement.prototype.getContext;
+      HTMLCanvasElement.prototype.getContext = function (type, ...rest) {
+        const ctx = getContext.call(this, type, ...rest);
+        if (ctx && /^(webgl|webgl2|experimental-webgl)$/.test(type) && !seen.has(ctx)) {
+          seen.add(ctx);
+          window.__glContexts.push(new WeakRef(ctx));
+        }
+        return ctx;
+      };
+      window.__rafCalls = 0;
+      const raf = window.requestAnimationFrame.bind(window);
+      window.requestAnimationFrame = (cb) => {
+        window.__rafCalls++;
+        return raf(cb);
+      };
+    });
+  }
   const page = await context.newPage();
   const consoleLines = [];
   page.on('console', (m) => consoleLines.push(`${m.type()}: ${m.text()}`));
@@ -85,12 +124,18 @@ for (const visit of plan.visits) {
   let outcome = 'timeout';
   try {
     await page.goto(visit.url, { waitUntil: 'load', timeout: visit.timeout_ms || 60000 });
-    const handle = await page.waitForFunction(
-      () => (window.tesseraError ? 'error' : window.tesseraIdle === true ? 'idle' : false),
-      null,
-      { timeout: visit.timeout_ms || 60000, polling: 50 },
-    );
-    outcome = await handle.jsonValue();
+    // A page of cycles runs nothing until the driver does; one to drop the connection
+    // of waits only for the first frame drawn.
+    const handle = visit.cycles
+      ? null
+      : await page.waitForFunction(
+          visit.drop
+            ? () => (window.tesseraError ? 'error' : window.tesseraStats && window.tesseraStats.triangles > 0 ? 'drawn' : false)
+            : () => (window.tesseraError ? 'error' : window.tesseraIdle === true ? 'idle' : false),
+          null,
+          { timeout: visit.timeout_ms || 60000, polling: visit.drop ? 10 : 50 },
+        );
+    outcome = handle ? await handle.jsonValue() : 'loaded';
   } catch (e) {
     consoleLines.push(`driver: ${e.message.split('\n')[0]}`);
   }
@@ -117,6 +162,128 @@ for (const visit of plan.visits) {
       consoleLines.push(`driver: interaction: ${e.message.split('\n')[0]}`);
     }
   }
+  // Optional: open / dispose cycles on one page (see the top of this file).
+  let cycles = null;
+  if (visit.cycles && outcome !== 'timeout') {
+    try {
+      const cdp = await context.newCDPSession(page);
+      const heap = async () => {
+        await cdp.send('HeapProfiler.collectGarbage');
+        await cdp.send('HeapProfiler.collectGarbage');
+        const h = await cdp.send('Runtime.getHeapUsage');
+        const more = await page.evaluate(async () => {
+          const wasm = await (await import('./tessera_web.js')).default();
+          const refs = window.__glContexts;
+          const alive = refs.map((r) => r.deref()).filter((c) => c);
+          return {
+            wasm_bytes: wasm.memory.buffer.byteLength,
+            contexts_made: refs.length,
+            contexts_unreleased: alive.length,
+            contexts_live: alive.filter((c) => !c.isContextLost()).length,
+          };
+        });
+        return { js_heap_used: h.usedSize, js_heap_total: h.totalSize, ...more };
+      };
+      const listeners = async () => {
+        const { result } = await cdp.send('Runtime.evaluate', { expression: 'window.__cycleCanvas' });
+        const { listeners } = await cdp.send('DOMDebugger.getEventListeners', { objectId: result.objectId });
+        await cdp.send('Runtime.releaseObject', { objectId: result.objectId });
+        return listeners.map((l) => l.type);
+      };
+      const { count, model, size } = visit.cycles;
+      const per_cycle = [];
+      const before = await heap();
+      for (let k = 0; k < count; k++) {
+        const t = Date.now();
+        const opened = await page.evaluate(
+          async ({ model, size }) => {
+            const { Tessera } = await import('./tessera.js');
+            const c = document.createElement('canvas');
+            [c.width, c.height] = size;
+            document.body.appendChild(c);
+            window.__cycleCanvas = c;
+            const v = await Tessera.view(c, { url: model, autoResize: false });
+            window.__cycleView = v;
+            const s = await new Promise((resolve, reject) => {
+              const timer = setTimeout(() => reject(new Error('no convergence in 60 s')), 60000);
+              if (v.idle) resolve(v.stats);
+              v.addEventListener('idle', (e) => { clearTimeout(timer); resolve(e.detail); }, { once: true });
+              v.addEventListener('error', (e) => { clearTimeout(timer); reject(new Error(e.detail.message)); }, { once: true });
+            });
+            return { triangles: s.triangles, frame: s.frame };
+          },
+          { model, size },
+        );
+        const on = await listeners();
+        // The heap with the view open (collected), against the same after dispose().
+        const open = visit.cycles.gc === false ? {} : await heap();
+        const rafBefore = await page.evaluate(async () => {
+          window.__cycleView.dispose();
+          window.__cycleView = null;
+          const n = window.__rafCalls;
+          await new Promise((r) => setTimeout(r, 150));
+          return [n, window.__rafCalls];
+        });
+        const off = await listeners();
+        await page.evaluate((keep) => {
+          window.__cycleCanvas.remove();
+          // The negative control ("keep": true) holds on to the canvases, so their
+          // contexts cannot be collected: the count must see them.
+          if (keep) (window.__kept = window.__kept || []).push(window.__cycleCanvas);
+          window.__cycleCanvas = null;
+        }, !!visit.cycles.keep);
+        per_cycle.push({
+          ...opened,
+          ms: Date.now() - t,
+          listeners_before: on,
+          listeners_after: off,
+          raf_after_dispose: rafBefore[1] - rafBefore[0],
+          open_js_heap_used: open.js_heap_used,
+          open_wasm_bytes: open.wasm_bytes,
+          open_contexts_live: open.contexts_live,
+          ...(visit.cycles.gc === false && k + 1 < count ? {} : await heap()),
+        });
+      }
+      const r0 = await page.evaluate(() => window.__rafCalls);
+      await page.waitForTimeout(1000);
+      const r1 = await page.evaluate(() => window.__rafCalls);
+      cycles = { before, per_cycle, raf_last_second: r1 - r0 };
+    } catch (e) {
+      consoleLines.push(`driver: cycles: ${e.message.split('\n')[0]}`);
+    }
+  }
+  // Optional: the connection dropped mid-stream after the first frame, then back.
+  let drop = null;
+  if (visit.drop && outcome !== 'timeout') {
+    try {
+      const snapshot = () =>
+        page.evaluate(() => ({
+          notice: window.tesseraNotice || null,
+          idle: window.tesseraIdle,
+          error: window.tesseraError,
+          stats: window.tesseraStats || null,
+        }));
+      drop = {};
+      drop.first = await snapshot();
+      const r = await fetch(`${visit.drop.control}/drop`);
+      if (!r.ok) throw new Error(`proxy control: HTTP ${r.status}`);
+      const t1 = Date.now();
+      await page
+        .waitForFunction(() => !!window.tesseraNotice || !!window.tesseraError, null, { timeout: 15000, polling: 50 })
+        .catch(() => {});
+      drop.dropped = { ...(await snapshot()), ms: Date.now() - t1 };
+      if (visit.drop.shot) await page.locator('#view').screenshot({ path: visit.drop.shot });
+      await fetch(`${visit.drop.control}/restore`);
+      const t2 = Date.now();
+      await page
+        .waitForFunction(() => window.tesseraIdle === true && !window.tesseraNotice, null, { timeout: visit.timeout_ms || 60000, polling: 50 })
+        .catch(() => {});
+      drop.restored = { ...(await snapshot()), ms: Date.now() - t2 };
+      if (visit.screenshot && drop.restored.idle) await page.locator('#view').screenshot({ path: visit.screenshot });
+    } catch (e) {
+      consoleLines.push(`driver: drop: ${e.message.split('\n')[0]}`);
+    }
+  }
   const state = await page
     .evaluate(() => ({
       error: window.tesseraError,
@@ -125,6 +292,7 @@ for (const visit of plan.visits) {
         return e && getComputedStyle(e).display !== 'none' ? e.innerText : null;
       })(),
       stats: window.tesseraStats || null,
+      notice: window.tesseraNotice || null,
     }))
     .catch(() => ({}));
   // Optional: touch gestures (CDP Input.dispatchTouchEvent: Chromium turns them into
@@ -253,10 +421,10 @@ for (const visit of plan.visits) {
       consoleLines.push(`driver: shot: ${e.message.split('\n')[0]}`);
     }
   }
-  if (visit.screenshot && outcome === visit.expect) {
+  if (visit.screenshot && outcome === visit.expect && !visit.drop) {
     await page.locator('#view').screenshot({ path: visit.screenshot });
   }
-  results.push({ name: visit.name, outcome, ms, ...state, interaction, shot, touch, pick, console: consoleLines });
+  results.push({ name: visit.name, outcome, ms, ...state, interaction, shot, touch, pick, cycles, drop, console: consoleLines });
   await context.close();
 }
 await browser.close();

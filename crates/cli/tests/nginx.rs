@@ -7,102 +7,12 @@
 mod common;
 mod remote;
 
-use std::net::{SocketAddr, TcpListener, TcpStream};
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
-use std::time::{Duration, Instant};
+use std::process::Command;
+
+use common::Nginx;
 
 fn tessera() -> Command {
     Command::new(env!("CARGO_BIN_EXE_tessera"))
-}
-
-/// The nginx binary: on PATH or in /usr/sbin (not on a plain user's PATH).
-fn nginx_binary() -> PathBuf {
-    let on_path = std::env::var_os("PATH")
-        .map(|p| {
-            std::env::split_paths(&p)
-                .map(|d| d.join("nginx"))
-                .collect::<Vec<_>>()
-        })
-        .unwrap_or_default();
-    on_path
-        .into_iter()
-        .chain([PathBuf::from("/usr/sbin/nginx")])
-        .find(|p| p.is_file())
-        .unwrap_or_else(|| {
-            panic!(
-                "nginx is not installed: this test needs it (apt-get install -y nginx-light; \
-                 .ci/run installs it)"
-            )
-        })
-}
-
-/// nginx serving `root` on a free loopback port; stopped when dropped.
-struct Nginx {
-    child: Child,
-    addr: SocketAddr,
-    _dir: tempfile::TempDir,
-}
-
-impl Nginx {
-    fn start(root: &Path) -> Nginx {
-        let bin = nginx_binary();
-        let dir = tempfile::tempdir().unwrap();
-        let d = dir.path().display();
-        let addr = TcpListener::bind("127.0.0.1:0")
-            .unwrap()
-            .local_addr()
-            .unwrap();
-        let conf = format!(
-            "daemon off;\nmaster_process off;\nworker_processes 1;\npid {d}/nginx.pid;\n\
-             error_log {d}/error.log;\nevents {{ worker_connections 64; }}\n\
-             http {{\n  access_log {d}/access.log;\n\
-             client_body_temp_path {d}/body;\n  proxy_temp_path {d}/proxy;\n\
-             fastcgi_temp_path {d}/fastcgi;\n  uwsgi_temp_path {d}/uwsgi;\n\
-             scgi_temp_path {d}/scgi;\n  default_type application/octet-stream;\n\
-             server {{ listen {addr}; root {}; }}\n}}\n",
-            root.display()
-        );
-        let conf_path = dir.path().join("nginx.conf");
-        std::fs::write(&conf_path, conf).unwrap();
-        let child = Command::new(&bin)
-            .arg("-p")
-            .arg(dir.path())
-            .arg("-e")
-            .arg(dir.path().join("error.log"))
-            .arg("-c")
-            .arg(&conf_path)
-            .stdout(Stdio::null())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .unwrap_or_else(|e| panic!("cannot start {}: {e}", bin.display()));
-        let mut n = Nginx {
-            child,
-            addr,
-            _dir: dir,
-        };
-        let start = Instant::now();
-        while TcpStream::connect(addr).is_err() {
-            if let Some(status) = n.child.try_wait().unwrap() {
-                let log =
-                    std::fs::read_to_string(n._dir.path().join("error.log")).unwrap_or_default();
-                panic!("nginx exited ({status}): {log}");
-            }
-            assert!(
-                start.elapsed() < Duration::from_secs(20),
-                "nginx does not listen on {addr}"
-            );
-            std::thread::sleep(Duration::from_millis(50));
-        }
-        n
-    }
-}
-
-impl Drop for Nginx {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
 }
 
 #[test]

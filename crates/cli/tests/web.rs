@@ -13,6 +13,17 @@
 //! (the depth read back, checked against a ray cast on the input mesh) and the wheel
 //! zooms toward the point under the cursor, which stays under it.
 //!
+//! Three more tests: 20 open/dispose cycles of the module on one page (new canvas each:
+//! every WebGL context released, no frame requested after dispose(), the canvas's
+//! listeners removed, the JS heap within a measured bound and the wasm memory flat; a
+//! negative control keeps the canvases); the same page and model as static files from
+//! nginx (its range requests) converging to the same cut and pixels as from `tessera
+//! serve`; a model file cut a quarter into its patches on nginx (what exists is shown,
+//! converged, the page's notice names the truncation) and the connection dropped by a
+//! proxy mid-stream after the first frame (a notice of the network error, the roots kept
+//! drawn, and once the proxy forwards again the view converges to `tessera render`'s
+//! cut and pixels, the notice gone).
+//!
 //! Builds nothing itself: without `web/dist` (or `TESSERA_WEB_DIST`) it fails saying to
 //! run `scripts/build-web` (`.ci/run` does, and installs chromium and playwright-core).
 
@@ -795,4 +806,517 @@ fn the_page_shows_the_model_as_tessera_render_and_errors_clearly() {
     assert_eq!(r[0]["outcome"], "error", "{:#}", r[0]);
     let text = r[0]["errorShown"].as_str().unwrap_or("");
     assert!(text.contains("WebGL2"), "no-webgl: the page shows {text:?}");
+}
+
+/// The Bunny built into `dir/models/bunny.tsr`; the models directory and the file.
+fn build_bunny(dir: &Path) -> (PathBuf, PathBuf) {
+    let bunny = repo().join("../shared/data/bunny.obj");
+    assert!(bunny.is_file(), "{} is missing", bunny.display());
+    let models = dir.join("models");
+    std::fs::create_dir_all(&models).unwrap();
+    let model = models.join("bunny.tsr");
+    let (code, _, stderr) = run_tessera(args!["build", bunny, "-o", model, "--quiet"]);
+    assert_eq!(code, 0, "{stderr}");
+    (models, model)
+}
+
+/// A copy of the built viewer in `dir/www` with web/tests/blank.html beside it.
+fn web_copy(dir: &Path, web: &Path) -> PathBuf {
+    let www = dir.join("www");
+    std::fs::create_dir_all(&www).unwrap();
+    for e in std::fs::read_dir(web).unwrap() {
+        let p = e.unwrap().path();
+        if p.is_file() {
+            std::fs::copy(&p, www.join(p.file_name().unwrap())).unwrap();
+        }
+    }
+    std::fs::copy(repo().join("web/tests/blank.html"), www.join("blank.html")).unwrap();
+    www
+}
+
+/// Browser runs one at a time (two shared cores; the figures stay comparable).
+static BROWSER: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+/// [`browse`], one run at a time.
+fn browse_alone(visits: Value, extra_args: &[&str], dir: &Path) -> Vec<Value> {
+    let _one = BROWSER.lock().unwrap_or_else(|e| e.into_inner());
+    browse(visits, extra_args, dir)
+}
+
+fn result<'a>(results: &'a [Value], name: &str) -> &'a Value {
+    results
+        .iter()
+        .find(|r| r["name"] == name)
+        .unwrap_or_else(|| panic!("no result for {name}"))
+}
+
+/// JS heap growth allowed over cycles 2..=20, bytes (after collection). Measured: +142 KB
+/// over those 19 cycles (1,591,692 -> 1,734,196 bytes), a few KB a cycle that V8's
+/// inline caches and optimised code take as the same code keeps running, while the
+/// wasm memory stays flat and every context is released (so no view is kept). A view's
+/// own state is in the wasm memory and the GPU (the heap with a view open is within
+/// 20 KB of the heap after its dispose), so those two catch a leaked view; this bound
+/// catches what piles up on the JS side per cycle (per-frame arrays, event closures,
+/// screenshot Blobs kept): over 27 KB a cycle, 3.6 times what was measured.
+const MAX_JS_HEAP_GROWTH: f64 = 512.0 * 1024.0;
+
+#[test]
+fn dispose_frees_contexts_heap_frame_loop_and_listeners_over_20_cycles() {
+    let web = dist();
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let (models, _) = build_bunny(dir);
+    let www = web_copy(dir, &web);
+    let (_server, addr) = serve(&models, &www);
+    let blank = format!("http://{addr}/blank.html");
+    let results = browse_alone(
+        json!([
+            {"name": "cycles", "url": blank, "expect": "loaded", "timeout_ms": 60000,
+             "cycles": {"count": 20, "model": "/models/bunny.tsr", "size": [320, 240]}},
+            // Negative control: the disposed canvases kept referenced, so their
+            // contexts cannot be collected: the count must see them.
+            {"name": "kept", "url": blank, "expect": "loaded", "timeout_ms": 60000,
+             "cycles": {"count": 3, "model": "/models/bunny.tsr", "size": [320, 240], "keep": true}},
+        ]),
+        &[],
+        dir,
+    );
+    let r = result(&results, "cycles");
+    let c = &r["cycles"];
+    assert!(c.is_object(), "no cycles result: {r:#}");
+    let cycles = c["per_cycle"].as_array().unwrap();
+    assert_eq!(cycles.len(), 20, "{r:#}");
+    let u = |v: &Value, k: &str| v[k].as_u64().unwrap_or_else(|| panic!("no {k}: {v:#}"));
+    for (k, cy) in cycles.iter().enumerate() {
+        // Each view opened, drew and converged to the same cut.
+        assert_eq!(cy["triangles"], cycles[0]["triangles"], "cycle {k}: {cy:#}");
+        assert!(
+            u(cy, "triangles") > 0 && u(cy, "frame") > 0,
+            "cycle {k}: {cy:#}"
+        );
+        // Its input listeners were on the canvas and dispose() removed them all.
+        let before = cy["listeners_before"].as_array().unwrap();
+        for t in [
+            "pointerdown",
+            "pointermove",
+            "pointerup",
+            "wheel",
+            "dblclick",
+        ] {
+            assert!(
+                before.iter().any(|l| l == t),
+                "cycle {k}: no {t} listener to remove: {cy:#}"
+            );
+        }
+        assert_eq!(
+            cy["listeners_after"],
+            json!([]),
+            "cycle {k}: listeners left after dispose()"
+        );
+        // No frame requested after dispose().
+        assert_eq!(
+            u(cy, "raf_after_dispose"),
+            0,
+            "cycle {k}: the frame loop runs on after dispose()"
+        );
+        // The view had a live context; after dispose() and a collection none is left.
+        assert!(u(cy, "open_contexts_live") >= 1, "cycle {k}: {cy:#}");
+        assert_eq!(
+            u(cy, "contexts_unreleased"),
+            0,
+            "cycle {k}: WebGL contexts not released: {cy:#}"
+        );
+    }
+    assert_eq!(
+        u(c, "raf_last_second"),
+        0,
+        "requestAnimationFrame still called after the last dispose()"
+    );
+    let last = &cycles[19];
+    let first = &cycles[0];
+    let made = u(last, "contexts_made");
+    let js = |v: &Value, k: &str| v[k].as_f64().unwrap();
+    let growth = js(last, "js_heap_used") - js(first, "js_heap_used");
+    let held = cycles
+        .iter()
+        .map(|cy| js(cy, "open_js_heap_used") - js(cy, "js_heap_used"))
+        .fold(0.0, |m: f64, d| if d.abs() > m.abs() { d } else { m });
+    let wasm_growth = js(last, "wasm_bytes") - js(first, "wasm_bytes");
+    eprintln!(
+        "20 open/dispose cycles: JS heap (collected) {} B before any, {} after the first, {} after the 20th (+{growth:.0} over 19 cycles, {:.0} a cycle; with a view open the heap differs by {held:.0} at most from after its dispose); wasm memory {} -> {} -> {} B (view open: {}); WebGL contexts made {made} (a probe and a view per cycle), live after each dispose 0, unreleased after collection {}; rAF calls after dispose 0, over 1 s after the last {}; console: {}",
+        c["before"]["js_heap_used"],
+        first["js_heap_used"],
+        last["js_heap_used"],
+        growth / 19.0,
+        c["before"]["wasm_bytes"],
+        first["wasm_bytes"],
+        last["wasm_bytes"],
+        last["open_wasm_bytes"],
+        last["contexts_unreleased"],
+        c["raf_last_second"],
+        r["console"]
+    );
+    assert!(made >= 20, "fewer contexts than views: {c:#}");
+    assert!(
+        growth < MAX_JS_HEAP_GROWTH,
+        "the JS heap grew {growth:.0} bytes over 19 open/dispose cycles"
+    );
+    // The wasm heap's memory never shrinks; freed viewers' memory is reused, so it
+    // stops growing after the first (measured: 10,551,296 bytes from the first cycle on;
+    // one viewer takes ~9 MB of it).
+    assert!(
+        wasm_growth <= 1048576.0,
+        "the wasm memory grew {wasm_growth:.0} bytes over 19 open/dispose cycles"
+    );
+    let console = r["console"].to_string();
+    assert!(
+        !console.contains("Too many active WebGL contexts") && !console.contains("pageerror"),
+        "{console}"
+    );
+    // The control: kept canvases keep their contexts, and the count sees each.
+    let k = &result(&results, "kept")["cycles"];
+    let kept = k["per_cycle"]
+        .as_array()
+        .expect("no result for the control");
+    assert_eq!(kept.len(), 3, "{k:#}");
+    eprintln!(
+        "negative control (3 disposed canvases kept referenced): {} contexts unreleased after collection",
+        kept[2]["contexts_unreleased"]
+    );
+    assert!(
+        u(&kept[2], "contexts_unreleased") >= 3,
+        "negative control: the count misses contexts kept alive: {k:#}"
+    );
+}
+
+#[test]
+fn the_page_from_nginx_converges_to_the_same_cut_and_pixels_as_from_tessera_serve() {
+    let web = dist();
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let (models, model) = build_bunny(dir);
+    let (_server, addr) = serve(&models, &web);
+    // Static hosting: the built page and the model as plain files.
+    let www = web_copy(dir, &web);
+    std::fs::create_dir(www.join("models")).unwrap();
+    std::fs::copy(&model, www.join("models/bunny.tsr")).unwrap();
+    let nginx = Nginx::start(&www);
+    let camera_a = format!(r#"{CAMERA_A}, "width": {WIDTH}, "height": {HEIGHT}}}"#);
+    let hash = format!("?model=/models/bunny.tsr#camera={}", encode(&camera_a));
+    let (served_png, nginx_png) = (dir.join("served.png"), dir.join("nginx.png"));
+    let results = browse_alone(
+        json!([
+            {"name": "serve", "url": format!("http://{addr}/{hash}"), "expect": "idle",
+             "screenshot": served_png, "timeout_ms": 120000, "viewport": [800, 480]},
+            {"name": "nginx", "url": format!("http://{}/{hash}", nginx.addr), "expect": "idle",
+             "screenshot": nginx_png, "timeout_ms": 120000, "viewport": [800, 480]},
+        ]),
+        &[],
+        dir,
+    );
+    let (s, n) = (result(&results, "serve"), result(&results, "nginx"));
+    for r in [s, n] {
+        assert_eq!(r["outcome"], "idle", "{r:#}");
+        assert_eq!(r["stats"]["pending"], 0, "{r:#}");
+    }
+    let (same, same_triangles) = render(&model, CAMERA_A, &dir.join("render-a"));
+    let (wrong, _) = render(&model, CAMERA_B, &dir.join("render-b"));
+    let (a, b) = (
+        Image::load_png(&served_png).unwrap(),
+        Image::load_png(&nginx_png).unwrap(),
+    );
+    assert_eq!((b.width, b.height), (WIDTH, HEIGHT));
+    let p = |x: &Image, y: &Image| psnr(x, y).unwrap_or(f64::INFINITY);
+    let ranges = nginx.ranges_answered();
+    eprintln!(
+        "nginx: {} triangles, {} nodes, {} requests ({ranges} answered 206 by nginx), {} bytes, converged {} ms after open; tessera serve: {} triangles, {} requests; PSNR nginx vs tessera serve {:.2} dB, vs tessera render {:.2} dB, vs another camera {:.2} dB",
+        n["stats"]["triangles"],
+        n["stats"]["nodes"],
+        n["stats"]["requests"],
+        n["stats"]["bytes_received"],
+        n["stats"]["converged_ms"],
+        s["stats"]["triangles"],
+        s["stats"]["requests"],
+        p(&b, &a),
+        p(&b, &same),
+        p(&b, &wrong)
+    );
+    // The same cut as through tessera serve and as tessera render --complete.
+    assert_eq!(
+        n["stats"]["triangles"], s["stats"]["triangles"],
+        "another cut from nginx"
+    );
+    assert_eq!(n["stats"]["triangles"].as_u64(), Some(same_triangles));
+    assert!(n["stats"]["max_level"].as_u64().unwrap() > 0, "{n:#}");
+    // Every model read after the first was a range nginx answered.
+    assert!(
+        ranges as u64 >= n["stats"]["requests"].as_u64().unwrap(),
+        "nginx answered {ranges} range requests of {}",
+        n["stats"]["requests"]
+    );
+    assert!(
+        p(&b, &same) >= MIN_PSNR_DB,
+        "nginx page vs tessera render: {:.2} dB",
+        p(&b, &same)
+    );
+    assert!(
+        p(&b, &a) >= MIN_PSNR_DB,
+        "nginx page vs tessera serve page: {:.2} dB",
+        p(&b, &a)
+    );
+    assert!(
+        p(&b, &wrong) < MIN_PSNR_DB,
+        "negative control passed: {:.2} dB",
+        p(&b, &wrong)
+    );
+}
+
+/// A TCP proxy in front of `upstream`, controlled over HTTP on a second port (the
+/// browser driver's "drop"): `GET /drop` cuts every open connection, in the middle of a
+/// response too, and refuses new ones; `GET /restore` forwards again. Until the first
+/// drop, responses pass at 200 KB/s (2 KiB every 10 ms), so the page is still streaming
+/// when the driver sees its first frame. Returns (proxy, control) addresses.
+fn dropping_proxy(upstream: SocketAddr) -> (SocketAddr, SocketAddr) {
+    use std::net::{Shutdown, TcpStream};
+    use std::sync::atomic::{AtomicBool, Ordering::SeqCst};
+    use std::sync::{Arc, Mutex};
+    struct State {
+        dropped: AtomicBool,
+        throttle: AtomicBool,
+        open: Mutex<Vec<TcpStream>>,
+    }
+    let st = Arc::new(State {
+        dropped: AtomicBool::new(false),
+        throttle: AtomicBool::new(true),
+        open: Mutex::new(Vec::new()),
+    });
+    let l = TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = l.local_addr().unwrap();
+    let s2 = st.clone();
+    std::thread::spawn(move || {
+        for c in l.incoming() {
+            let Ok(client) = c else { continue };
+            if s2.dropped.load(SeqCst) {
+                let _ = client.shutdown(Shutdown::Both);
+                continue;
+            }
+            let Ok(up) = TcpStream::connect(upstream) else {
+                continue;
+            };
+            {
+                let mut open = s2.open.lock().unwrap();
+                open.push(client.try_clone().unwrap());
+                open.push(up.try_clone().unwrap());
+            }
+            let (mut c_in, mut u_out) = (client.try_clone().unwrap(), up.try_clone().unwrap());
+            std::thread::spawn(move || {
+                let _ = std::io::copy(&mut c_in, &mut u_out);
+                let _ = u_out.shutdown(Shutdown::Write);
+            });
+            let (mut u_in, mut c_out, st) = (up, client, s2.clone());
+            std::thread::spawn(move || {
+                let mut buf = [0u8; 2048];
+                loop {
+                    match u_in.read(&mut buf) {
+                        Ok(0) | Err(_) => break,
+                        Ok(n) => {
+                            if c_out.write_all(&buf[..n]).is_err() {
+                                break;
+                            }
+                        }
+                    }
+                    if st.throttle.load(SeqCst) {
+                        std::thread::sleep(std::time::Duration::from_millis(10));
+                    }
+                }
+                let _ = c_out.shutdown(Shutdown::Both);
+            });
+        }
+    });
+    let control = TcpListener::bind("127.0.0.1:0").unwrap();
+    let control_addr = control.local_addr().unwrap();
+    std::thread::spawn(move || {
+        for c in control.incoming() {
+            let Ok(mut c) = c else { continue };
+            let mut head = Vec::new();
+            let mut b = [0u8; 1];
+            while !head.ends_with(b"\r\n\r\n") && c.read(&mut b).is_ok_and(|n| n == 1) {
+                head.push(b[0]);
+            }
+            let head = String::from_utf8_lossy(&head);
+            if head.starts_with("GET /drop") {
+                st.throttle.store(false, SeqCst);
+                st.dropped.store(true, SeqCst);
+                for s in st.open.lock().unwrap().drain(..) {
+                    let _ = s.shutdown(Shutdown::Both);
+                }
+            } else if head.starts_with("GET /restore") {
+                st.dropped.store(false, SeqCst);
+            }
+            let _ =
+                c.write_all(b"HTTP/1.1 200 OK\r\ncontent-length: 2\r\nconnection: close\r\n\r\nok");
+        }
+    });
+    (addr, control_addr)
+}
+
+#[test]
+fn a_truncated_model_and_a_dropped_connection_show_clear_messages() {
+    let web = dist();
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let (models, model) = build_bunny(dir);
+    let (_server, addr) = serve(&models, &web);
+    // The model cut in the middle of its patches, on a static host (tessera serve does
+    // not serve a model it cannot read).
+    let bytes = std::fs::read(&model).unwrap();
+    let h = tessera_format::ModelIndex::parse_header(&bytes, bytes.len() as u64).unwrap();
+    let cut = (h.patch_data_offset + (h.file_bytes - h.patch_data_offset) / 4) as usize;
+    let www = web_copy(dir, &web);
+    std::fs::create_dir(www.join("models")).unwrap();
+    std::fs::write(www.join("models/cut.tsr"), &bytes[..cut]).unwrap();
+    let nginx = Nginx::start(&www);
+    // The connection dropped mid-stream after the first frame, then the server back.
+    let (proxy, control) = dropping_proxy(addr);
+    let camera_a = format!(r#"{CAMERA_A}, "width": {WIDTH}, "height": {HEIGHT}}}"#);
+    let (dropped_png, restored_png) = (dir.join("dropped.png"), dir.join("restored.png"));
+    let cut_png = dir.join("cut.png");
+    let results = browse_alone(
+        json!([
+            {"name": "truncated", "url": format!("http://{}/?model=/models/cut.tsr#camera={}", nginx.addr, encode(&camera_a)),
+             "expect": "idle", "timeout_ms": 120000, "viewport": [800, 480], "screenshot": cut_png},
+            {"name": "drop", "url": format!("http://{proxy}/?model=/models/bunny.tsr#camera={}", encode(&camera_a)),
+             "expect": "drawn", "timeout_ms": 120000, "viewport": [800, 480], "screenshot": restored_png,
+             "drop": {"control": format!("http://{control}"), "shot": dropped_png}},
+        ]),
+        &[],
+        dir,
+    );
+    // The truncated model: what exists is read and shown (the index and the patches
+    // before the cut), converged as far as it goes; the page names the problem.
+    let (same, same_triangles) = render(&model, CAMERA_A, &dir.join("render-a"));
+    let t = result(&results, "truncated");
+    let ts = &t["stats"];
+    let text = t["notice"].as_str().unwrap_or("");
+    eprintln!(
+        "truncated at {cut} of {} bytes: {} with {} triangles, {} nodes (the whole file: {same_triangles}), {} patches missing; the page says {text:?}",
+        h.file_bytes, t["outcome"], ts["triangles"], ts["nodes"], ts["failed_patches"]
+    );
+    assert_eq!(t["outcome"], "idle", "truncated: {ts:#}");
+    assert!(t["error"].is_null(), "{t:#}");
+    assert!(
+        text.contains(&format!(
+            "file truncated: expected {} bytes, found {cut}",
+            h.file_bytes
+        )) && text.contains("missing"),
+        "truncated: the page shows {text:?}"
+    );
+    assert!(
+        ts["failed_patches"].as_u64().unwrap() > 0,
+        "nothing missing? {ts:#}"
+    );
+    // Cut a quarter into the patches: part of the view's cut is missing, coarser
+    // nodes stand in (measured: 11,455 of 21,921 triangles, level 2, 22 patches missing).
+    assert!(ts["triangles"].as_u64().unwrap() < same_triangles, "{ts:#}");
+    assert!(
+        ts["triangles"].as_u64().unwrap() > 0 && ts["max_level"].as_u64().unwrap() > 0,
+        "{ts:#}"
+    );
+    let shown = Image::load_png(&cut_png).expect("no screenshot of the truncated model");
+    let (lit, _) = tessera_image::diff_stats(&shown, &background_like(&shown), 8).unwrap();
+    let total = (shown.width * shown.height) as usize;
+    eprintln!(
+        "truncated: {lit} of {total} pixels drawn, {:.2} dB against the whole model's render",
+        psnr(&shown, &same).unwrap_or(f64::INFINITY)
+    );
+    assert!(
+        lit * 10 > total,
+        "the truncated model's canvas is blank ({lit} of {total} pixels)"
+    );
+    // The drop: after the first frame, mid-stream (requests in flight, not converged).
+    let d = result(&results, "drop");
+    assert_eq!(d["outcome"], "drawn", "{d:#}");
+    let (first, dropped, restored) = (
+        &d["drop"]["first"],
+        &d["drop"]["dropped"],
+        &d["drop"]["restored"],
+    );
+    assert!(
+        first.is_object() && dropped.is_object() && restored.is_object(),
+        "{d:#}"
+    );
+    assert!(
+        first["stats"]["triangles"].as_u64().unwrap() > 0,
+        "{first:#}"
+    );
+    assert_eq!(
+        first["stats"]["idle"], false,
+        "converged before the drop: {first:#}"
+    );
+    assert!(first["notice"].is_null(), "{first:#}");
+    // While the server is away: a clear network error on the page, not a fatal one; what
+    // had loaded stays drawn; the view does not claim to have converged.
+    let notice = dropped["notice"].as_str().unwrap_or("");
+    assert!(
+        notice.contains("network error")
+            && notice.contains("dropped the connection")
+            && notice.contains("retrying"),
+        "the page shows no clear network error after the drop: {dropped:#}"
+    );
+    assert!(
+        dropped["error"].is_null(),
+        "the drop stopped the view: {dropped:#}"
+    );
+    assert_eq!(
+        dropped["idle"], false,
+        "idle with requests failing: {dropped:#}"
+    );
+    assert!(
+        dropped["stats"]["failed_requests"].as_u64().unwrap() > 0,
+        "{dropped:#}"
+    );
+    assert!(
+        dropped["stats"]["triangles"].as_u64() >= first["stats"]["triangles"].as_u64(),
+        "the page dropped what it had: {dropped:#}"
+    );
+    let kept = Image::load_png(&dropped_png).expect("no screenshot while dropped");
+    let (lit, _) = tessera_image::diff_stats(&kept, &background_like(&kept), 8).unwrap();
+    let total = (kept.width * kept.height) as usize;
+    assert!(
+        lit * 10 > total,
+        "the canvas is blank after the drop ({lit} of {total} pixels drawn)"
+    );
+    // The server back: the notice goes, the page converges to the cut and pixels of
+    // tessera render (it retries with backoff: 0.5 s, 1 s, 2 s, ... per patch).
+    assert_eq!(
+        restored["idle"], true,
+        "no recovery once the server was back: {restored:#}"
+    );
+    assert!(
+        restored["notice"].is_null() && restored["error"].is_null(),
+        "{restored:#}"
+    );
+    assert_eq!(
+        restored["stats"]["triangles"].as_u64(),
+        Some(same_triangles),
+        "{restored:#}"
+    );
+    let back = Image::load_png(&restored_png).expect("no screenshot once restored");
+    let p_back = psnr(&back, &same).unwrap_or(f64::INFINITY);
+    let p_kept = psnr(&kept, &same).unwrap_or(f64::INFINITY);
+    eprintln!(
+        "dropped after the first frame ({} triangles, {} of {} bytes): notice in {} ms: {notice:?}; {} requests failed, {} triangles kept drawn ({lit} of {total} pixels, {p_kept:.2} dB against the converged render); server back: converged in {} ms to {} triangles, {p_back:.2} dB",
+        first["stats"]["triangles"],
+        first["stats"]["bytes_received"],
+        restored["stats"]["bytes_received"],
+        dropped["ms"],
+        dropped["stats"]["failed_requests"],
+        dropped["stats"]["triangles"],
+        restored["ms"],
+        restored["stats"]["triangles"]
+    );
+    assert!(
+        p_back >= MIN_PSNR_DB,
+        "after recovery: {p_back:.2} dB against tessera render"
+    );
 }

@@ -195,6 +195,8 @@ pub struct Fetcher {
     ready: VecDeque<Fetched>,
     /// Answers settled without decoding (failed requests).
     settled: Vec<Answer>,
+    /// Nodes failed for good ([`Fetcher::fail`]).
+    gone: FxHashSet<u32>,
     next_id: u64,
     stats: FetchStats,
 }
@@ -211,6 +213,7 @@ impl Fetcher {
             requests: FxHashMap::default(),
             ready: VecDeque::new(),
             settled: Vec::new(),
+            gone: FxHashSet::default(),
             next_id: 0,
             stats: FetchStats::default(),
         }
@@ -250,6 +253,11 @@ impl Fetcher {
                 .iter()
                 .filter(|n| !self.wanted.contains(n))
                 .count()
+    }
+
+    /// Nodes failed for good (their bytes do not exist), never asked again.
+    pub fn gone(&self) -> &FxHashSet<u32> {
+        &self.gone
     }
 
     /// Requests in flight.
@@ -379,6 +387,24 @@ impl Fetcher {
                     });
                 }
             }
+        }
+    }
+
+    /// Fails request `id` for good: its nodes are answered [`Answer::Failed`] (their
+    /// bytes do not exist: past the end of a truncated file), never asked again.
+    pub fn fail(&mut self, id: u64, error: &str) {
+        let Some(nodes) = self.requests.remove(&id) else {
+            return;
+        };
+        self.stats.failed_requests += 1;
+        for node in nodes {
+            self.busy.remove(&node);
+            self.wanted.remove(&node);
+            self.gone.insert(node);
+            self.settled.push(Answer::Failed {
+                node,
+                error: error.to_string(),
+            });
         }
     }
 

@@ -56,11 +56,20 @@ async fn read_with<T>(
     sparse: &RefCell<SparseBytes>,
     f: impl Fn(&SparseBytes) -> Result<T, tessera_format::FormatError>,
 ) -> Result<T, String> {
+    use tessera_format::ByteSource;
     for _ in 0..64 {
         let step = sparse.borrow().attempt(&f);
         match step {
             Attempt::Done(v) => return Ok(v),
             Attempt::Failed(e) => return Err(e.to_string()),
+            // A truncated file (opened at the length its header names): not there.
+            Attempt::Need(r) if r.end > http.len() => {
+                return Err(tessera_format::FormatError::Truncated {
+                    expected_bytes: sparse.borrow().len(),
+                    actual_bytes: http.len(),
+                }
+                .to_string())
+            }
             Attempt::Need(r) => {
                 let body = http
                     .get(r.clone(), false)
@@ -105,6 +114,18 @@ fn pump(
         let Some(req) = fetcher.borrow_mut().next_request() else {
             break;
         };
+        // Past the end of a truncated file (opened at the length its header names):
+        // those patches do not exist; they fail for good, their parents stay drawn.
+        if req.range.end > http.len() {
+            fetcher.borrow_mut().fail(
+                req.id,
+                &format!(
+                    "the file ends at byte {}: the model is truncated",
+                    http.len()
+                ),
+            );
+            continue;
+        }
         let (http, fetcher, fatal, closed) =
             (http.clone(), fetcher.clone(), fatal.clone(), closed.clone());
         spawn_local(async move {
@@ -218,6 +239,8 @@ pub struct Viewer {
     pinch: Option<Pinch>,
     /// The camera and near/far planes of the frame the depth texture holds.
     drawn: Option<(Camera, (f64, f64))>,
+    /// Why part of the model cannot be shown (a truncated file), for the page.
+    warning: Option<String>,
 }
 
 impl Drop for Viewer {
@@ -328,7 +351,26 @@ impl Viewer {
             .open(prefix_bytes)
             .await
             .map_err(|e| err(e.message()))?;
-        let sparse = Rc::new(RefCell::new(SparseBytes::new(http.len())));
+        // A file shorter than its header says (a partial upload or copy): opened at the
+        // length the header names, so the index and the patches that exist are read and
+        // shown; what lies past the end is reported, its nodes' parents drawn instead.
+        let served = http.len();
+        let (length, warning) = match ModelIndex::parse_header(&prefix, served) {
+            Err(e @ tessera_format::FormatError::Truncated { expected_bytes, .. })
+                if prefix.len() as u64 >= tessera_format::HEADER_BYTES
+                    && expected_bytes > served =>
+            {
+                (
+                    expected_bytes,
+                    Some(format!(
+                        "{url}: {e}: the patches stored past byte {served} are missing \
+                         (coarser levels are shown in their place)"
+                    )),
+                )
+            }
+            _ => (served, None),
+        };
+        let sparse = Rc::new(RefCell::new(SparseBytes::new(length)));
         sparse.borrow_mut().insert(0, prefix);
         let cannot = |m: String| err(format!("cannot open {url}: {m}"));
         let index = read_with(&http, &sparse, |s| ModelIndex::read_top(s, TOP_PAGES))
@@ -459,6 +501,7 @@ impl Viewer {
             answers: Vec::new(),
             pinch: None,
             drawn: None,
+            warning,
         })
     }
 
@@ -535,8 +578,15 @@ impl Viewer {
             }
         }
         let fetch = self.source.fetcher.borrow();
+        // Nodes whose bytes do not exist (a truncated file) stay missing: their parents
+        // are the view's final state, as long as nothing else failed (a network outage
+        // retried with backoff is not converged).
+        let gone = fetch.gone();
+        let misses_settled = self.stats.cache_misses == 0
+            || (self.stats.cache_misses <= gone.len()
+                && self.scheduler.failed().iter().all(|n| gone.contains(n)));
         let converged = self.stats.pending_loads == 0
-            && self.stats.cache_misses == 0
+            && misses_settled
             && self.stats.index_wants == 0
             && self.stats.morph_blending == 0
             && fetch.pending() == 0
@@ -582,6 +632,8 @@ impl Viewer {
             "converged_ms": self.converged_ms,
             "adapter": self.gpu.adapter_label,
             "pivot": self.nav.pivot().to_array(),
+            // A problem that does not stop the view (a truncated file), or null.
+            "warning": self.warning,
             // Answers to point_at: [{"id", "point": [x, y, z] or null}].
             "picks": std::mem::take(&mut self.answers),
         })

@@ -4,8 +4,9 @@
 #![allow(dead_code)]
 
 use std::collections::HashMap;
+use std::net::{SocketAddr, TcpListener};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::{Child, Command, Output, Stdio};
 
 use tessera_build::{BuildOptions, BuildReport, NoProgress};
 use tessera_format::{Header, Model, PatchData};
@@ -356,4 +357,101 @@ pub fn leftovers(dir: &Path) -> Vec<String> {
                 .collect()
         })
         .unwrap_or_default()
+}
+
+/// The nginx binary: on PATH or in /usr/sbin (not on a plain user's PATH).
+pub fn nginx_binary() -> PathBuf {
+    let on_path = std::env::var_os("PATH")
+        .map(|p| {
+            std::env::split_paths(&p)
+                .map(|d| d.join("nginx"))
+                .collect::<Vec<_>>()
+        })
+        .unwrap_or_default();
+    on_path
+        .into_iter()
+        .chain([PathBuf::from("/usr/sbin/nginx")])
+        .find(|p| p.is_file())
+        .unwrap_or_else(|| {
+            panic!(
+                "nginx is not installed: this test needs it (apt-get install -y nginx-light; \
+                 .ci/run installs it)"
+            )
+        })
+}
+
+/// Debian's nginx (no root paths: prefix, temp dirs, logs and pid in a tempdir, `daemon
+/// off`) serving `root` as static files on a free loopback port, with the content types
+/// a browser needs for an ES module and WebAssembly; stopped when dropped.
+pub struct Nginx {
+    child: Child,
+    pub addr: SocketAddr,
+    dir: tempfile::TempDir,
+}
+
+impl Nginx {
+    pub fn start(root: &Path) -> Nginx {
+        let bin = nginx_binary();
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path().display();
+        let addr = TcpListener::bind("127.0.0.1:0")
+            .unwrap()
+            .local_addr()
+            .unwrap();
+        let conf = format!(
+            "daemon off;\nmaster_process off;\nworker_processes 1;\npid {d}/nginx.pid;\n\
+             error_log {d}/error.log;\nevents {{ worker_connections 64; }}\n\
+             http {{\n  access_log {d}/access.log;\n\
+             client_body_temp_path {d}/body;\n  proxy_temp_path {d}/proxy;\n\
+             fastcgi_temp_path {d}/fastcgi;\n  uwsgi_temp_path {d}/uwsgi;\n\
+             scgi_temp_path {d}/scgi;\n  default_type application/octet-stream;\n\
+             types {{ text/html html; text/javascript js; application/wasm wasm; application/json json; }}\n\
+             server {{ listen {addr}; root {}; }}\n}}\n",
+            root.display()
+        );
+        let conf_path = dir.path().join("nginx.conf");
+        std::fs::write(&conf_path, conf).unwrap();
+        let child = Command::new(&bin)
+            .arg("-p")
+            .arg(dir.path())
+            .arg("-e")
+            .arg(dir.path().join("error.log"))
+            .arg("-c")
+            .arg(&conf_path)
+            .stdout(Stdio::null())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .unwrap_or_else(|e| panic!("cannot start {}: {e}", bin.display()));
+        let mut n = Nginx { child, addr, dir };
+        let start = std::time::Instant::now();
+        while std::net::TcpStream::connect(addr).is_err() {
+            if let Some(status) = n.child.try_wait().unwrap() {
+                let log =
+                    std::fs::read_to_string(n.dir.path().join("error.log")).unwrap_or_default();
+                panic!("nginx exited ({status}): {log}");
+            }
+            assert!(
+                start.elapsed().as_secs() < 20,
+                "nginx does not listen on {addr}"
+            );
+            std::thread::sleep(std::time::Duration::from_millis(50));
+        }
+        n
+    }
+
+    /// Requests with a Range header answered 206 (from nginx's access log).
+    pub fn ranges_answered(&self) -> usize {
+        std::fs::read_to_string(self.dir.path().join("access.log"))
+            .unwrap_or_default()
+            .lines()
+            .filter(|l| l.contains("\" 206 "))
+            .count()
+    }
+}
+
+impl Drop for Nginx {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
 }
