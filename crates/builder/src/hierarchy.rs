@@ -13,6 +13,7 @@ use crate::partition::{centroid3, parent_id, read_leaf_faces, tet_id, Leaf, Part
 use crate::patch::{
     grid_to_local, remove_bad_triangles_noting, CacheOrder, Welder, WorkPatch, WorkVertex,
 };
+use crate::texture::Baker;
 use crate::timing::{Phase, Phases};
 use crate::{BuildError, BuildOptions, BuildReport, Progress};
 use rayon::prelude::*;
@@ -24,7 +25,7 @@ use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 use std::sync::Mutex;
 use tessera_format::{
     encode_patch, write_model_until, Header, NodeRecord, PatchData, PatchSpool, SpooledPatch,
-    ATTR_COLORS, ATTR_NORMALS, ATTR_UVS, NODE_FLAG_LEAF, NO_NODE,
+    ATTR_COLORS, ATTR_NORMALS, ATTR_TEXTURE, ATTR_UVS, NODE_FLAG_LEAF, NO_NODE,
 };
 use tessera_tetra::{DiamondKey, Locator, Tet};
 
@@ -42,6 +43,7 @@ struct NodeInfo {
     triangle_count: u32,
     diamond: u32,
     quant_min: [u32; 3],
+    texture_size: [u16; 2],
     /// The builder's patch (until the parent encodes it).
     work: Option<SpooledPatch>,
     /// The final encoded patch.
@@ -75,6 +77,8 @@ struct Ctx<'a> {
     cfg: SimplifyConfig,
     step: f64,
     phases: Phases,
+    /// The texture stage, for models with [`ATTR_TEXTURE`].
+    baker: Option<Baker>,
 }
 
 /// Leaf vertices read from the memory-mapped vertex store between two releases of its
@@ -124,6 +128,7 @@ impl Ctx<'_> {
                     normal: normals.get(v),
                     color: tessera_mesh::Vertex::default().color,
                     uv: tessera_mesh::Vertex::default().uv,
+                    texture: tessera_mesh::NO_TEXTURE,
                 }
             }
             _ => {
@@ -138,6 +143,11 @@ impl Ctx<'_> {
                         tessera_mesh::Vertex::default().color
                     },
                     uv: s.uv,
+                    texture: if self.baker.is_some() {
+                        s.texture
+                    } else {
+                        tessera_mesh::NO_TEXTURE
+                    },
                 }
             }
         }
@@ -240,13 +250,43 @@ impl Ctx<'_> {
             triangle_count: p.triangle_count() as u32,
             diamond: self.diamond_ids.fetch_add(1, Ordering::Relaxed),
             quant_min: quant_min(&p.vertices),
+            texture_size: [0, 0],
             work: None,
             out: None,
         }
     }
 
     /// Encode a node's final patch (with its morph targets) into the output spool.
-    fn emit(&self, id: TetId, p: &WorkPatch, morph: Vec<[u32; 3]>) -> Result<(), BuildError> {
+    fn emit(
+        &self,
+        id: TetId,
+        p: &WorkPatch,
+        morph: Vec<[u32; 3]>,
+        morph_uvs: &[[f32; 2]],
+    ) -> Result<(), BuildError> {
+        let baked = match &self.baker {
+            Some(b) if !p.vertices.is_empty() => {
+                let (error, leaf) = {
+                    let nodes = self
+                        .nodes
+                        .lock()
+                        .map_err(|_| self.internal_err("poisoned node map"))?;
+                    let n = nodes
+                        .get(&id)
+                        .ok_or_else(|| self.internal_err("emit of unknown node"))?;
+                    (n.error, n.leaf)
+                };
+                Some(b.bake(&p.vertices, &p.indices, morph_uvs, error, self.step, leaf)?)
+            }
+            _ => None,
+        };
+        let texture_size = baked.as_ref().map_or([0, 0], |b| {
+            [b.texture.width as u16, b.texture.height as u16]
+        });
+        let (charts, chart_ids, texture) = match baked {
+            Some(b) => (b.charts, b.chart_ids, Some(b.texture)),
+            None => (vec![], vec![], None),
+        };
         let data = PatchData {
             positions: p.vertices.iter().map(|v| v.q).collect(),
             normals: p.vertices.iter().map(|v| v.normal).collect(),
@@ -262,6 +302,9 @@ impl Ctx<'_> {
             },
             morph_targets: morph,
             indices: p.indices.clone(),
+            charts,
+            chart_ids,
+            texture,
         };
         let qmin = quant_min(&p.vertices);
         let sp = self
@@ -276,6 +319,7 @@ impl Ctx<'_> {
             .ok_or_else(|| self.internal_err("emit of unknown node"))?;
         n.out = Some(sp);
         n.quant_min = qmin;
+        n.texture_size = texture_size;
         n.work = None;
         Ok(())
     }
@@ -351,12 +395,23 @@ impl Ctx<'_> {
         lap.mark(Phase::Morph);
         let mut child_err = 0.0f64;
         let mut balls = Vec::new();
+        let target_uv = self
+            .baker
+            .as_ref()
+            .map(|_| diamond::target_uvs(&merged, &dest));
         for (k, (id, p)) in kids.iter().enumerate() {
             let morph = merged.child_maps[k]
                 .iter()
                 .map(|&mi| merged.vertices[dest[mi as usize] as usize].q)
                 .collect();
-            self.emit(*id, p, morph)?;
+            let uvs: Vec<[f32; 2]> = match &target_uv {
+                Some(t) => merged.child_maps[k]
+                    .iter()
+                    .map(|&mi| t[mi as usize])
+                    .collect(),
+                None => vec![],
+            };
+            self.emit(*id, p, morph, &uvs)?;
             let nodes = self
                 .nodes
                 .lock()
@@ -425,6 +480,7 @@ impl Ctx<'_> {
                 triangle_count: p.triangle_count() as u32,
                 diamond: diamond_id,
                 quant_min: quant_min(&p.vertices),
+                texture_size: [0, 0],
                 work: Some(work),
                 out: None,
             };
@@ -474,13 +530,15 @@ pub(crate) fn build_hierarchy(
         }
         by_level[l as usize].entry(t.diamond()).or_default().push(t);
     }
+    let textured = imp.attributes.uvs && imp.attributes.textures && !opts.ignore_textures;
     let attributes = ATTR_NORMALS
         | if imp.attributes.colors {
             ATTR_COLORS
         } else {
             0
         }
-        | if imp.attributes.uvs { ATTR_UVS } else { 0 };
+        | if imp.attributes.uvs { ATTR_UVS } else { 0 }
+        | if textured { ATTR_TEXTURE } else { 0 };
     let ctx = Ctx {
         imp,
         part,
@@ -511,6 +569,13 @@ pub(crate) fn build_hierarchy(
         },
         step: part.grid.step(),
         phases: Phases::default(),
+        baker: textured.then(|| {
+            Baker::new(
+                imp.report.textures.clone(),
+                opts.texture,
+                opts.memory_bytes / 2,
+            )
+        }),
     };
     let total_diamonds: usize = by_level.iter().map(|m| m.len()).sum();
     progress.stage("simplify diamonds", total_diamonds as u64);
@@ -545,7 +610,7 @@ pub(crate) fn build_hierarchy(
     for r in 0..6u8 {
         let id = (r, 0u8, 0u64);
         if let Some(p) = ctx.load_child(id)? {
-            ctx.emit(id, &p, Vec::new())?;
+            ctx.emit(id, &p, Vec::new(), &[])?;
         }
     }
     report.degenerate_triangles_removed = ctx.degenerate.load(Ordering::Relaxed);
@@ -555,6 +620,7 @@ pub(crate) fn build_hierarchy(
         .then(|| crate::partition::bits_for_edge(part.grid.size, shortest));
     report.duplicate_triangles_removed = ctx.duplicate.load(Ordering::Relaxed);
     report.simplifier_repairs = ctx.repaired.load(Ordering::Relaxed);
+    report.textures = ctx.baker.as_ref().map(Baker::report);
     finalize(&ctx, output, opts, progress, report)
 }
 
@@ -621,6 +687,7 @@ fn finalize(
             saturated_sphere: n.sat.to_f32(grid.size),
             normal_cone: n.cone,
             quant_min: n.quant_min,
+            texture_size: n.texture_size,
             ..Default::default()
         };
         max_error = max_error.max(rec.error);

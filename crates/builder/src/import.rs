@@ -13,7 +13,7 @@ use std::path::Path;
 use std::time::Instant;
 use tessera_mesh::{Attributes, ImportReport, MeshError, MeshHeader, MeshVisitor, Vertex};
 
-/// A vertex as stored in the temporary vertex store. 36 bytes.
+/// A vertex as stored in the temporary vertex store. 40 bytes.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct StoredVertex {
@@ -21,6 +21,8 @@ pub struct StoredVertex {
     pub normal: [f32; 3],
     pub color: [u8; 4],
     pub uv: [f32; 2],
+    /// `tessera_mesh::Vertex::texture`.
+    pub texture: u32,
 }
 
 /// Axis-aligned bounding box of the input positions.
@@ -160,6 +162,7 @@ impl MeshVisitor for Sink<'_> {
             normal: v.normal,
             color: v.color,
             uv: v.uv,
+            texture: v.texture,
         };
         self.vertices
             .write_all(bytemuck::bytes_of(&s))
@@ -487,8 +490,8 @@ mod tests {
         // 1.8 GB vertex store through a memory map.
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("v.bin");
-        let n = (64 << 20) / 36;
-        std::fs::write(&path, vec![1u8; n * 36]).unwrap();
+        let n = (64 << 20) / std::mem::size_of::<StoredVertex>();
+        std::fs::write(&path, vec![1u8; n * std::mem::size_of::<StoredVertex>()]).unwrap();
         let store = VertexStore::open(&path).unwrap();
         let Some(before) = rss_file_kib() else { return }; // not Linux
         let mut sum = 0.0f32;

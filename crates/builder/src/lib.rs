@@ -24,6 +24,7 @@ mod hierarchy;
 pub mod import;
 pub mod partition;
 pub mod patch;
+pub mod texture;
 mod timing;
 pub mod verify;
 
@@ -67,6 +68,10 @@ pub struct BuildOptions {
     pub color_weight: f32,
     /// Build as if the input had no vertex colours (all white, nothing stored).
     pub ignore_colors: bool,
+    /// Build as if the input had no textures (faces in their material's colour).
+    pub ignore_textures: bool,
+    /// How patch textures are stored.
+    pub texture: texture::TextureOptions,
 }
 
 /// [`BuildOptions::color_weight`] by default: the order of the normals' weight (0.5,
@@ -86,6 +91,8 @@ impl Default for BuildOptions {
             index_page_nodes: tessera_format::DEFAULT_PAGE_NODES,
             color_weight: DEFAULT_COLOR_WEIGHT,
             ignore_colors: false,
+            ignore_textures: false,
+            texture: texture::TextureOptions::default(),
         }
     }
 }
@@ -215,6 +222,8 @@ pub struct BuildReport {
     /// Largest distance between an input vertex and its stored position.
     pub quant_error_max: f64,
     pub max_error: f64,
+    /// The texture stage's figures (textured models).
+    pub textures: Option<texture::TextureReport>,
     /// (stage, seconds).
     pub stage_seconds: Vec<(String, f64)>,
     pub seconds: f64,

@@ -19,10 +19,17 @@ pub struct WorkVertex {
     pub color: [u8; 4],
     /// Texture coordinates (zero when absent).
     pub uv: [f32; 2],
+    /// The texture it samples (`tessera_mesh::NO_TEXTURE` when none): vertices of two
+    /// textures are two vertices, so simplification keeps their seam.
+    pub texture: u32,
 }
 
+/// Bytes of a [`WorkVertex`] in the spool.
+const WORK_VERTEX_BYTES: usize = std::mem::size_of::<WorkVertex>();
+const _: () = assert!(WORK_VERTEX_BYTES == 40);
+
 /// The byte identity of a vertex, used as a hash key for welding.
-pub type VertexKey = [u32; 9];
+pub type VertexKey = [u32; 10];
 
 impl WorkVertex {
     pub fn key(&self) -> VertexKey {
@@ -53,7 +60,9 @@ impl WorkPatch {
 
     /// Serialise for the spool: `u32 vertex_count, u32 index_count, vertices, indices`.
     pub fn to_bytes(&self) -> Vec<u8> {
-        let mut out = Vec::with_capacity(8 + self.vertices.len() * 36 + self.indices.len() * 4);
+        let mut out = Vec::with_capacity(
+            8 + self.vertices.len() * WORK_VERTEX_BYTES + self.indices.len() * 4,
+        );
         out.extend_from_slice(&(self.vertices.len() as u32).to_le_bytes());
         out.extend_from_slice(&(self.indices.len() as u32).to_le_bytes());
         out.extend_from_slice(bytemuck::cast_slice(&self.vertices));
@@ -66,8 +75,9 @@ impl WorkPatch {
     pub fn from_bytes(b: &[u8]) -> Option<WorkPatch> {
         let vc = u32::from_le_bytes(b.get(0..4)?.try_into().ok()?) as usize;
         let ic = u32::from_le_bytes(b.get(4..8)?.try_into().ok()?) as usize;
-        let vb = b.get(8..8 + vc * 36)?;
-        let ib = b.get(8 + vc * 36..8 + vc * 36 + ic * 4)?;
+        let vb = b.get(8..8 + vc * WORK_VERTEX_BYTES)?;
+        let at = 8 + vc * WORK_VERTEX_BYTES;
+        let ib = b.get(at..at + ic * 4)?;
         // One copy each (the buffer need not be aligned for the element types).
         let vertices = bytemuck::pod_collect_to_vec(vb);
         let indices = bytemuck::pod_collect_to_vec(ib);

@@ -334,6 +334,7 @@ fn replay_tally(path: &Path, cfg: &SimplifyConfig) -> (Tally, Tally) {
                             normal: p.normals.get(i).copied().unwrap_or_default(),
                             color: p.colors.get(i).copied().unwrap_or([255; 4]),
                             uv: p.uvs.get(i).copied().unwrap_or_default(),
+                            texture: tessera_mesh::NO_TEXTURE,
                         })
                         .collect(),
                     indices: p.indices,

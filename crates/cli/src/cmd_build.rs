@@ -47,6 +47,16 @@ pub struct Args {
     /// simplification).
     #[arg(long, default_value_t = tessera_build::DEFAULT_COLOR_WEIGHT)]
     color_weight: f32,
+    /// Ignore the input's textures (faces in their material's colour).
+    #[arg(long)]
+    ignore_textures: bool,
+    /// How patch textures are stored: png (lossless: the finest patches keep the source
+    /// texels exactly) or jpeg.
+    #[arg(long, default_value = "png", value_parser = ["png", "jpeg"])]
+    texture_codec: String,
+    /// JPEG quality of patch textures (1..=100).
+    #[arg(long, default_value_t = 90, value_parser = clap::value_parser!(u8).range(1..=100))]
+    texture_quality: u8,
     /// Print the report as JSON on stdout.
     #[arg(long)]
     json: bool,
@@ -66,6 +76,15 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         index_page_nodes: a.index_page_nodes,
         color_weight: a.color_weight,
         ignore_colors: a.ignore_colors,
+        ignore_textures: a.ignore_textures,
+        texture: tessera_build::texture::TextureOptions {
+            codec: if a.texture_codec == "jpeg" {
+                tessera_format::TextureCodec::Jpeg
+            } else {
+                tessera_format::TextureCodec::Png
+            },
+            quality: a.texture_quality,
+        },
     };
     let bars = Bars::new(a.quiet || a.json);
     crate::progress::install_interrupt_handler();
@@ -77,6 +96,9 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         print_report(&a.output, &r);
     }
     warn_collapsed(&r);
+    for line in r.textures.iter().flat_map(|t| &t.unreadable_images) {
+        eprintln!("warning: texture image {line}: its faces are drawn in their material's colour");
+    }
     Ok(ExitCode::SUCCESS)
 }
 
@@ -96,6 +118,20 @@ pub fn report_json(r: &BuildReport) -> serde_json::Value {
         "input_triangles_per_second": r.triangles_per_second(),
         "quantization": { "bits": r.quant_bits, "step": r.quant_step, "max_error": r.quant_error_max, "mean_edge": r.mean_edge },
         "max_error": r.max_error,
+        "textures": r.textures.as_ref().map(|t| json!({
+            "source_images": t.source_images,
+            "source_texels": t.source_texels,
+            "patch_texels": t.texels,
+            "leaf_texels": t.leaf_texels,
+            "bytes": t.bytes,
+            "bytes_per_source_texel": t.bytes as f64 / t.source_texels.max(1) as f64,
+            "crops": t.crops,
+            "atlases": t.atlases,
+            "solid_only": t.solid_only,
+            "downsampled_to_fit": t.downsampled_to_fit,
+            "image_redecodes": t.image_redecodes,
+            "unreadable_images": t.unreadable_images,
+        })),
         "stages": r.stage_seconds.iter().map(|(n, s)| json!({"stage": n, "seconds": s})).collect::<Vec<_>>(),
         "warnings": {
             "degenerate_triangles_removed": r.degenerate_triangles_removed,
@@ -137,6 +173,27 @@ fn print_report(out: &std::path::Path, r: &BuildReport) {
         r.quant_bits, r.quant_step, r.quant_error_max, r.mean_edge
     );
     println!("  coarsest error {:.4e} (model units)", r.max_error);
+    if let Some(t) = &r.textures {
+        println!(
+            "  textures     {} source images ({:.1} Mtexels) -> {:.1} Mtexels in patches \
+             ({:.2}x the source; leaves {:.2}x), {} bytes ({:.3} bytes/source texel)",
+            t.source_images,
+            t.source_texels as f64 / 1e6,
+            t.texels as f64 / 1e6,
+            t.texels as f64 / t.source_texels.max(1) as f64,
+            t.leaf_texels as f64 / t.source_texels.max(1) as f64,
+            t.bytes,
+            t.bytes as f64 / t.source_texels.max(1) as f64
+        );
+        println!(
+            "               {} crops, {} atlases, {} solid colour only, {} downsampled to fit {} texels",
+            t.crops,
+            t.atlases,
+            t.solid_only,
+            t.downsampled_to_fit,
+            tessera_format::MAX_TEXTURE_DIM
+        );
+    }
     println!(
         "  time         {:.2} s, {:.0} input triangles/s",
         r.seconds,

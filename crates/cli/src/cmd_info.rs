@@ -4,7 +4,9 @@ use anyhow::Context;
 use serde_json::json;
 use std::path::PathBuf;
 use std::process::ExitCode;
-use tessera_format::{Grid, ModelIndex, ATTR_COLORS, ATTR_NORMALS, ATTR_UVS, NODE_FLAG_LEAF};
+use tessera_format::{
+    Grid, ModelIndex, ATTR_COLORS, ATTR_NORMALS, ATTR_TEXTURE, ATTR_UVS, NODE_FLAG_LEAF,
+};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -18,15 +20,24 @@ pub struct Args {
 pub fn info_json(m: &ModelIndex, file: &str) -> serde_json::Value {
     let h = m.header();
     let nodes = m.nodes();
-    let mut per_level: Vec<(u64, u64, u64)> = vec![(0, 0, 0); h.level_count as usize];
+    let mut per_level: Vec<(u64, u64, u64, u64)> = vec![(0, 0, 0, 0); h.level_count as usize];
+    let (mut texels, mut leaf_texels, mut largest) = (0u64, 0u64, [0u16; 2]);
     let (mut verts, mut tris, mut leaf_tris, mut leaves) = (0u64, 0u64, 0u64, 0u64);
     let mut min_err = f32::INFINITY;
     for n in nodes {
+        let t = u64::from(n.texture_size[0]) * u64::from(n.texture_size[1]);
+        texels += t;
+        if u32::from(n.texture_size[0]) * u32::from(n.texture_size[1])
+            > u32::from(largest[0]) * u32::from(largest[1])
+        {
+            largest = n.texture_size;
+        }
         verts += n.vertex_count as u64;
         tris += n.triangle_count as u64;
         if n.flags & NODE_FLAG_LEAF != 0 {
             leaves += 1;
             leaf_tris += n.triangle_count as u64;
+            leaf_texels += t;
         } else {
             min_err = min_err.min(n.error);
         }
@@ -34,6 +45,7 @@ pub fn info_json(m: &ModelIndex, file: &str) -> serde_json::Value {
             l.0 += 1;
             l.1 += n.triangle_count as u64;
             l.2 += n.patch_bytes as u64;
+            l.3 += t;
         }
     }
     let mut attrs = vec!["positions"];
@@ -45,6 +57,9 @@ pub fn info_json(m: &ModelIndex, file: &str) -> serde_json::Value {
     }
     if h.attributes & ATTR_UVS != 0 {
         attrs.push("uvs");
+    }
+    if h.attributes & ATTR_TEXTURE != 0 {
+        attrs.push("textures");
     }
     let grid = Grid::of_header(h);
     let ix = m.index_stats();
@@ -76,7 +91,13 @@ pub fn info_json(m: &ModelIndex, file: &str) -> serde_json::Value {
         },
         "bytes_per_input_triangle": h.file_bytes as f64 / h.input_triangles.max(1) as f64,
         "builder": { "leaf_triangles_max": h.leaf_triangles_max, "node_triangles_target": h.node_triangles_target },
-        "per_level": per_level.iter().enumerate().map(|(l, (n, t, b))| json!({"level": l, "nodes": n, "triangles": t, "patch_bytes": b})).collect::<Vec<_>>(),
+        "textures": (h.attributes & ATTR_TEXTURE != 0).then(|| json!({
+            "texels": texels,
+            "leaf_texels": leaf_texels,
+            "largest": largest,
+            "mean_texels_per_patch": texels as f64 / h.node_count.max(1) as f64,
+        })),
+        "per_level": per_level.iter().enumerate().map(|(l, (n, t, b, x))| json!({"level": l, "nodes": n, "triangles": t, "patch_bytes": b, "texels": x})).collect::<Vec<_>>(),
     })
 }
 
@@ -91,6 +112,22 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     let up = scene.guess_up();
     j["extent"] = json!({ "min": scene.min.to_array(), "max": scene.max.to_array() });
     j["up_guess"] = json!(up.to_string());
+    // Texture bytes: the texture block length in each patch header (local files).
+    if m.header().attributes & ATTR_TEXTURE != 0 {
+        if let Ok(local) = tessera_format::Model::open(&a.model) {
+            let bytes: u64 = (0..m.nodes().len())
+                .filter_map(|i| local.patch_bytes(i).ok())
+                .filter_map(|b| {
+                    b.get(44..48)
+                        .map(|s| u32::from_le_bytes([s[0], s[1], s[2], s[3]]))
+                })
+                .map(u64::from)
+                .sum();
+            j["textures"]["bytes"] = json!(bytes);
+            j["textures"]["bytes_per_input_triangle"] =
+                json!(bytes as f64 / m.header().input_triangles.max(1) as f64);
+        }
+    }
     if a.json {
         println!("{}", serde_json::to_string_pretty(&j)?);
         return Ok(ExitCode::SUCCESS);
@@ -163,12 +200,41 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         "  bytes/input tri {:.3}",
         j["bytes_per_input_triangle"].as_f64().unwrap_or(0.0)
     );
-    println!("  level   nodes   triangles   patch bytes");
+    if let Some(t) = j["textures"].as_object() {
+        println!(
+            "  textures        {:.2} Mtexels in patch textures ({:.2} M in leaves), largest {}x{}, {:.0} texels/patch{}",
+            t["texels"].as_f64().unwrap_or(0.0) / 1e6,
+            t["leaf_texels"].as_f64().unwrap_or(0.0) / 1e6,
+            t["largest"][0],
+            t["largest"][1],
+            t["mean_texels_per_patch"].as_f64().unwrap_or(0.0),
+            match t.get("bytes").and_then(|b| b.as_u64()) {
+                Some(b) => format!(
+                    ", {b} bytes ({:.2} bytes/input triangle)",
+                    b as f64 / h.input_triangles.max(1) as f64
+                ),
+                None => String::new(),
+            }
+        );
+    }
+    let textured = j["textures"].is_object();
+    println!(
+        "  level   nodes   triangles   patch bytes{}",
+        if textured { "    texels" } else { "" }
+    );
     if let Some(levels) = j["per_level"].as_array() {
         for l in levels {
             println!(
-                "  {:>5} {:>7} {:>11} {:>13}",
-                l["level"], l["nodes"], l["triangles"], l["patch_bytes"]
+                "  {:>5} {:>7} {:>11} {:>13}{}",
+                l["level"],
+                l["nodes"],
+                l["triangles"],
+                l["patch_bytes"],
+                if textured {
+                    format!(" {:>9}", l["texels"])
+                } else {
+                    String::new()
+                }
             );
         }
     }

@@ -5,7 +5,7 @@
 //! `.glb`), `gltfpack` (quantised: `KHR_mesh_quantization` + `KHR_texture_transform`; and
 //! `-cc`: `EXT_meshopt_compression`), `gltf-pipeline -d` (Draco). Each non-Draco file must
 //! `tessera build`, `verify`, and keep the OBJ build's triangle count and the OBJ's extent
-//! (within the writer's quantisation); the textured material is named in a warning. The
+//! (within the writer's quantisation) and use the scan's texture image. The
 //! Draco file must fail with one error line naming `KHR_draco_mesh_compression`.
 //!
 //! Without the data or the tools the test says why on stderr and passes.
@@ -196,9 +196,17 @@ fn third_party_gltf_files_build_like_the_obj() {
             Some(triangles),
             "{name}: triangles differ from the OBJ build"
         );
-        assert!(
-            stderr.contains("textures are not used yet") && stderr.contains("material_0"),
-            "{name}: the textured material is not named in a warning:\n{stderr}"
+        // The texture is used: one source image (the scan's 4096x4096 PNG), cut into
+        // patch textures, none unreadable.
+        assert_eq!(
+            report["textures"]["source_images"].as_u64(),
+            Some(1),
+            "{name}: the texture was not used:\n{stderr}"
+        );
+        assert_eq!(
+            report["textures"]["source_texels"].as_u64(),
+            obj_report["textures"]["source_texels"].as_u64(),
+            "{name}: not the OBJ's image"
         );
         let (ok, _, err) = tessera(&["verify".as_ref(), model.as_os_str()]);
         assert!(ok, "{name}: verify failed:\n{err}");

@@ -658,7 +658,13 @@ fn check_header(h: &Header) -> Result<(), FormatError> {
             h.quant_bits
         )));
     }
-    if h.attributes & !(crate::ATTR_NORMALS | crate::ATTR_COLORS | crate::ATTR_UVS) != 0 {
+    if h.attributes & crate::ATTR_TEXTURE != 0 && h.attributes & crate::ATTR_UVS == 0 {
+        return Err(invalid_header("textures without UVs".to_string()));
+    }
+    if h.attributes
+        & !(crate::ATTR_NORMALS | crate::ATTR_COLORS | crate::ATTR_UVS | crate::ATTR_TEXTURE)
+        != 0
+    {
         return Err(invalid_header(format!(
             "unknown attribute bits {:#x}",
             h.attributes

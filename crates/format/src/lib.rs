@@ -34,7 +34,8 @@ mod writer;
 #[cfg(feature = "write")]
 pub use atomic::{AtomicFile, AtomicFileError};
 pub use codec::{
-    decode_patch, encode_patch, oct_decode, oct_encode, PatchData, PatchShape, MAX_PATCH_TRIANGLES,
+    decode_patch, decode_patch_with, encode_patch, oct_decode, oct_encode, PatchData, PatchShape,
+    PatchTexture, TextureChart, TextureCodec, MAX_PATCH_CHARTS, MAX_PATCH_TRIANGLES,
     MAX_PATCH_VERTICES, PATCH_CODEC_VERSION, PATCH_FLAG_MORPH, PATCH_FLAG_ZSTD, PATCH_HEADER_BYTES,
 };
 pub use error::FormatError;
@@ -47,8 +48,8 @@ pub use pages::{
 #[cfg(feature = "mmap")]
 pub use reader::{MappedFile, Model};
 pub use records::{
-    header_crc32, Header, NodeRecord, ATTR_COLORS, ATTR_NORMALS, ATTR_UVS, FORMAT_VERSION, MAGIC,
-    NODE_FLAG_LEAF, NO_NODE,
+    header_crc32, Header, NodeRecord, ATTR_COLORS, ATTR_NORMALS, ATTR_TEXTURE, ATTR_UVS,
+    FORMAT_VERSION, MAGIC, MAX_TEXTURE_DIM, NODE_FLAG_LEAF, NO_NODE,
 };
 #[cfg(feature = "mmap")]
 pub use verify::verify_structure;

@@ -24,7 +24,7 @@ use bytemuck::{Pod, Zeroable};
 use rustc_hash::{FxHashMap, FxHashSet};
 
 use crate::error::FormatError;
-use crate::records::{NodeRecord, NODE_FLAG_LEAF, NO_NODE};
+use crate::records::{NodeRecord, MAX_TEXTURE_DIM, NODE_FLAG_LEAF, NO_NODE};
 
 /// Nodes per index page the writer uses unless told otherwise.
 pub const DEFAULT_PAGE_NODES: u32 = 512;
@@ -37,7 +37,7 @@ pub const PAGE_ENTRY_BYTES: u64 = 16;
 /// zstd level of index pages (they are small and read far more often than written).
 const PAGE_ZSTD_LEVEL: i32 = 19;
 /// Upper bound of one node's uncompressed page bytes (see the column list).
-/// (The columns need at most 109 bytes a node; `docs/format.md` states 128.)
+/// (The columns need at most 113 bytes a node; `docs/format.md` states 128.)
 const MAX_NODE_PAGE_BYTES: usize = 128;
 
 /// Page flags bits (per node, column 0). Bit 0 is [`NODE_FLAG_LEAF`].
@@ -330,6 +330,13 @@ pub fn encode_page(nodes: &[NodeRecord], patch_base: u64) -> Vec<u8> {
         out.extend(cones.iter().map(|c| c[k] as u8));
         out.extend(cones.iter().map(|c| (c[k] >> 8) as u8));
     }
+    // Column 18: texture size, LEB128 width then height per node (two zero bytes a node
+    // in models without textures, which zstd squeezes to nothing).
+    for n in nodes {
+        for d in n.texture_size {
+            put_leb(&mut out, d as u64);
+        }
+    }
     zstd::bulk::compress(&out, PAGE_ZSTD_LEVEL).expect("zstd compression in memory")
 }
 
@@ -532,6 +539,18 @@ pub fn decode_page(
     for (n, code) in nodes.iter_mut().zip(cones) {
         n.normal_cone = decode_cone(code);
     }
+    for n in nodes.iter_mut() {
+        for k in 0..2 {
+            let d = c.leb_u32()?;
+            if d > MAX_TEXTURE_DIM {
+                return Err(corrupt(
+                    page,
+                    format!("texture size {d} exceeds {MAX_TEXTURE_DIM}"),
+                ));
+            }
+            n.texture_size[k] = d as u16;
+        }
+    }
     if c.at != raw.len() {
         return Err(corrupt(
             page,
@@ -643,7 +662,8 @@ mod tests {
             saturated_sphere: [(i / 3) as f32, 1.0, 2.0, 1e3 + (i / 3) as f32],
             normal_cone: NO_CONE,
             quant_min: [i * 7, u32::MAX - i, i % 3],
-            reserved: [0; 3],
+            texture_size: [(i % 7) as u16 * 300, (i % 5) as u16 * 17],
+            reserved: [0; 2],
             pad: 0,
         }
     }

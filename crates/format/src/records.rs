@@ -7,13 +7,21 @@ use bytemuck::{Pod, Zeroable};
 /// First 8 bytes of every model file.
 pub const MAGIC: [u8; 8] = *b"TESSERA\0";
 /// The version this code writes. Readers refuse files with a newer version.
-pub const FORMAT_VERSION: u32 = 2;
+pub const FORMAT_VERSION: u32 = 3;
 /// `Header::attributes` bit: patches carry per-vertex normals.
 pub const ATTR_NORMALS: u32 = 1;
 /// `Header::attributes` bit: patches carry per-vertex RGBA8 colours.
 pub const ATTR_COLORS: u32 = 2;
 /// `Header::attributes` bit: patches carry per-vertex texture coordinates.
 pub const ATTR_UVS: u32 = 4;
+/// `Header::attributes` bit: every patch carries a texture of its own (cut from the
+/// source images at the resolution its error needs), with the charts that map the
+/// vertices' source UVs into it (see `PatchData::charts`). Requires [`ATTR_UVS`].
+pub const ATTR_TEXTURE: u32 = 8;
+/// Largest width or height of a patch texture: the builder never writes larger ones
+/// (WebGL2 and wgpu's downlevel limits guarantee 4096 on every device Tessera targets;
+/// Nexus issue #72 is textures beyond the GPU's limit).
+pub const MAX_TEXTURE_DIM: u32 = 4096;
 /// A missing node index (no parent, no child).
 pub const NO_NODE: u32 = u32::MAX;
 /// `NodeRecord::flags` bit: the node is a leaf of the partition (full-resolution triangles).
@@ -128,8 +136,11 @@ pub struct NodeRecord {
     /// Minimum corner of the patch's vertices on the global grid; positions are encoded
     /// as offsets from it.
     pub quant_min: [u32; 3],
+    /// Width and height of the patch's texture in texels, `[0, 0]` when the model has
+    /// no [`ATTR_TEXTURE`] (so budgets know a texture's GPU bytes before it is read).
+    pub texture_size: [u16; 2],
     /// Zero.
-    pub reserved: [u32; 3],
+    pub reserved: [u32; 2],
 }
 
 const _: () = assert!(std::mem::size_of::<Header>() == 256);

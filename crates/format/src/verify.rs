@@ -8,7 +8,7 @@ use crate::grid::Grid;
 use crate::index::{ByteSource, ModelIndex};
 #[cfg(feature = "mmap")]
 use crate::reader::Model;
-use crate::records::{NodeRecord, NODE_FLAG_LEAF, NO_NODE};
+use crate::records::{NodeRecord, ATTR_TEXTURE, NODE_FLAG_LEAF, NO_NODE};
 
 /// At most this many problem messages are kept (all are counted).
 pub const MAX_PROBLEM_MESSAGES: usize = 100;
@@ -125,6 +125,19 @@ pub fn verify_index<S: ByteSource + ?Sized>(index: &ModelIndex, source: &S) -> V
         }
         if n.reserved.iter().any(|&v| v != 0) {
             r.problem(format!("node {i}: reserved fields are not zero"));
+        }
+        let textured = h.attributes & ATTR_TEXTURE != 0;
+        let has_texture = n.texture_size != [0, 0];
+        if textured && n.vertex_count > 0 && n.texture_size.contains(&0) {
+            r.problem(format!(
+                "node {i}: texture size {:?} in a textured model",
+                n.texture_size
+            ));
+        } else if !textured && has_texture {
+            r.problem(format!(
+                "node {i}: texture size {:?} in a model without textures",
+                n.texture_size
+            ));
         }
         if n.flags & NODE_FLAG_LEAF != 0 {
             leaf_triangles += u64::from(n.triangle_count);

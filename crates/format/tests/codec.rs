@@ -13,11 +13,12 @@ fn shape(quant_min: [u32; 3], vertex_count: u32, triangle_count: u32) -> PatchSh
         quant_min,
         vertex_count,
         triangle_count,
+        texture_size: [0, 0],
     }
 }
 
 fn section_lengths(bytes: &[u8]) -> Vec<u32> {
-    (0..6)
+    (0..7)
         .map(|k| u32::from_le_bytes(bytes[16 + 4 * k..20 + 4 * k].try_into().unwrap()))
         .collect()
 }
@@ -680,5 +681,81 @@ proptest! {
             s[2][k] ^= xor;
         });
         let _ = decode_patch(&mangled, ATTR_NORMALS, shape(qmin, n as u32, tris as u32));
+    }
+}
+
+/// A textured patch: a strip whose vertices sample two charts of a 24x16 texture.
+fn textured_patch(codec: TextureCodec) -> PatchData {
+    let mut p = strip_patch(30);
+    p.uvs = (0..30).map(|i| [i as f32 / 29.0, (i % 2) as f32]).collect();
+    p.charts = vec![
+        TextureChart {
+            image: 0,
+            scale: [0.5, -1.0],
+            offset: [0.0, 1.0],
+        },
+        TextureChart {
+            image: u32::MAX,
+            scale: [0.0, 0.0],
+            offset: [0.75, 0.5],
+        },
+    ];
+    p.chart_ids = (0..30).map(|i| (i >= 20) as u16).collect();
+    let rgba: Vec<u8> = (0..24 * 16)
+        .flat_map(|i| [(i * 7) as u8, (i / 24 * 16) as u8, 200, 255])
+        .collect();
+    p.texture = Some(PatchTexture::encode(24, 16, &rgba, codec, 95).unwrap());
+    p
+}
+
+#[test]
+fn textured_patches_round_trip_and_damage_is_an_error() {
+    let attrs = ATTR_NORMALS | ATTR_UVS | ATTR_TEXTURE;
+    for codec in [TextureCodec::Png, TextureCodec::Jpeg] {
+        let mut p = textured_patch(codec);
+        p.normals = vec![[0.0, 0.0, 1.0]; 30];
+        let qmin = quant_min(&p);
+        let bytes = encode_patch(&p, attrs, qmin);
+        let sh = PatchShape {
+            texture_size: [24, 16],
+            ..shape(qmin, 30, p.triangle_count() as u32)
+        };
+        let back = decode_patch(&bytes, attrs, sh).unwrap();
+        assert_eq!(back.charts, p.charts);
+        assert_eq!(back.chart_ids, p.chart_ids);
+        assert_eq!(back.uvs, p.uvs);
+        let t = back.texture.as_ref().unwrap();
+        assert_eq!((t.width, t.height, t.codec), (24, 16, Some(codec)));
+        let mut want = p.texture.clone().unwrap();
+        want.decode_rgba().unwrap();
+        assert_eq!(t.rgba, want.rgba);
+        if codec == TextureCodec::Png {
+            // Lossless: the texels that went in.
+            assert_eq!(t.rgba[4 * 25..4 * 26], [(25 * 7) as u8, 16, 200, 255]);
+        }
+        // Geometry-only decoding keeps the texture encoded.
+        let geo = decode_patch_with(&bytes, attrs, sh, false).unwrap();
+        assert!(geo.texture.as_ref().unwrap().rgba.is_empty());
+        // The node record's size must match.
+        let wrong = PatchShape {
+            texture_size: [24, 17],
+            ..sh
+        };
+        assert!(decode_patch(&bytes, attrs, wrong).is_err());
+        // A patch of a textured model without a texture block, and damaged blocks.
+        assert!(decode_patch(&bytes, attrs & !ATTR_TEXTURE, sh).is_err());
+        let tex_at = bytes.len() - p.texture.as_ref().unwrap().encoded.len() - 12;
+        let mut bad_codec = bytes.clone();
+        bad_codec[tex_at] = 9;
+        assert!(decode_patch(&bad_codec, attrs, sh).is_err());
+        let mut bad_image = bytes.clone();
+        for b in &mut bad_image[tex_at + 12..] {
+            *b = 0x5A;
+        }
+        assert!(decode_patch(&bad_image, attrs, sh).is_err());
+        assert!(decode_patch_with(&bad_image, attrs, sh, false).is_ok());
+        for cut in [1, 12, bytes.len() - tex_at] {
+            assert!(decode_patch(&bytes[..bytes.len() - cut], attrs, sh).is_err());
+        }
     }
 }

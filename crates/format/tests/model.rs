@@ -203,8 +203,8 @@ fn corruption_is_detected() {
         matches!(
             e,
             FormatError::UnsupportedVersion {
-                found: 3,
-                supported: 2
+                found: 4,
+                supported: 3
             }
         ),
         "{e}"
@@ -228,7 +228,7 @@ fn corruption_is_detected() {
             e,
             FormatError::OldVersion {
                 found: 1,
-                supported: 2
+                supported: 3
             }
         ),
         "{e}"
@@ -409,7 +409,8 @@ fn documented_offsets() {
     assert_eq!(offset_of!(NodeRecord, tight_sphere), 56);
     assert_eq!(offset_of!(NodeRecord, normal_cone), 88);
     assert_eq!(offset_of!(NodeRecord, quant_min), 104);
-    assert_eq!(offset_of!(NodeRecord, reserved), 116);
+    assert_eq!(offset_of!(NodeRecord, texture_size), 116);
+    assert_eq!(offset_of!(NodeRecord, reserved), 120);
 }
 
 /// Issue 14, failure 1: a header with a valid CRC but a bounding sphere that is not

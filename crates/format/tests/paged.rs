@@ -42,7 +42,7 @@ fn model(count: u32, page_nodes: u32) -> (Vec<u8>, Vec<NodeRecord>) {
         nodes.push(NodeRecord {
             patch_offset: at,
             tet_path: i as u64,
-            patch_bytes: 40 + i % 7,
+            patch_bytes: 48 + i % 7,
             patch_crc32: i.wrapping_mul(2654435761),
             vertex_count: 3 + i % 11,
             triangle_count: 1 + i % 13,

@@ -96,6 +96,7 @@ pub fn write_sphere(
             normals: false,
             colors: opts.colors,
             uvs: false,
+            textures: false,
         },
         vertex_count,
         face_count,

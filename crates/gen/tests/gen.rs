@@ -394,6 +394,7 @@ fn write_tiny(path: &Path) {
             normals: true,
             colors: true,
             uvs: true,
+            textures: false,
         },
         vertex_count: 4,
         face_count: 2,
@@ -412,6 +413,7 @@ fn write_tiny(path: &Path) {
             normal: [0.0, -0.4, 0.8],
             color: [10 * i as u8, 20, 30, 200],
             uv: [i as f32 * 0.25, 0.5],
+            texture: tessera_mesh::NO_TEXTURE,
         })
         .unwrap();
     }

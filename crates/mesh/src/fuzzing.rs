@@ -18,7 +18,7 @@
 
 use std::path::Path;
 
-use crate::{ImportReport, MeshError, MeshHeader, MeshVisitor, Vertex};
+use crate::{ImportReport, MeshError, MeshHeader, MeshVisitor, Vertex, NO_TEXTURE};
 
 /// Vertices or triangles a [`CheckingVisitor`] accepts before it stops the reader.
 pub const DELIVERY_CAP: u64 = 1 << 24;
@@ -37,6 +37,9 @@ pub struct CheckingVisitor {
     pub triangles: u64,
     /// The header's claims, for the checks at the end.
     pub header: MeshHeader,
+    /// Vertices delivered with a texture, and the largest texture index among them.
+    pub textured: u64,
+    pub max_texture: Option<u32>,
 }
 
 impl MeshVisitor for CheckingVisitor {
@@ -62,6 +65,10 @@ impl MeshVisitor for CheckingVisitor {
             return Err(MeshError::Visitor(format!(
                 "fuzz visitor: more than {DELIVERY_CAP} vertices"
             )));
+        }
+        if vertex.texture != NO_TEXTURE {
+            self.textured += 1;
+            self.max_texture = self.max_texture.max(Some(vertex.texture));
         }
         self.vertices += 1;
         Ok(())
@@ -104,6 +111,20 @@ fn check(
             assert!(report.triangles > 0, "success without triangles");
             if let Some(n) = v.header.vertex_count {
                 assert_eq!(n, v.vertices, "header vertex count not delivered");
+            }
+            let a = v.header.attributes;
+            assert_eq!(
+                a.textures,
+                v.textured > 0,
+                "the header's textures flag and the vertices disagree"
+            );
+            assert!(!a.textures || a.uvs, "textures without uvs");
+            if let Some(t) = v.max_texture {
+                assert!(
+                    (t as usize) < report.textures.len(),
+                    "vertex texture {t} of {} textures",
+                    report.textures.len()
+                );
             }
         }
         Err(e) => {

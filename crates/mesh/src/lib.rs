@@ -12,6 +12,7 @@ mod error;
 #[doc(hidden)]
 pub mod fuzzing;
 mod gltf_import;
+mod image_probe;
 mod mtl;
 mod obj;
 mod ply_read;
@@ -24,7 +25,10 @@ mod types;
 pub use error::MeshError;
 pub use ply_write::{PlyWriter, PlyWriterOptions};
 pub use progress::{NoProgress, Progress};
-pub use types::{Attributes, ImportReport, MeshHeader, MeshVisitor, Vertex};
+pub use types::{
+    Attributes, ImageSource, ImportReport, MeshHeader, MeshVisitor, TextureSource, Vertex, Wrap,
+    NO_TEXTURE,
+};
 
 use std::path::Path;
 
@@ -101,9 +105,17 @@ fn head_of(r: impl std::io::Read, n: u64) -> std::io::Result<Vec<u8>> {
 /// transform flipping the winding; colour = `COLOR_0` x the material's base colour
 /// factor, in sRGB; UVs through the base colour texture's `KHR_texture_transform`.
 /// `KHR_mesh_quantization` and `EXT_meshopt_compression` are read; Draco and any other
-/// required extension are refused by name. Textures are not carried yet: textured
-/// materials are named in [`ImportReport::textures_not_used`] and a warning. Buffers are
-/// memory-mapped, not read into memory.
+/// required extension are refused by name. Buffers are memory-mapped, not read into
+/// memory.
+///
+/// Textures (OBJ `map_Kd`, glTF `baseColorTexture` through `TEXCOORD_0`, PNG or JPEG):
+/// each vertex that samples one carries its index in [`ImportReport::textures`]
+/// ([`Vertex::texture`], else [`NO_TEXTURE`]), which describes the image (where its bytes
+/// are, its size from its header, wrap modes, tint, v convention); the images themselves
+/// are not read. Textures that cannot be used (missing or unreadable images, other
+/// formats, other coordinate sets) leave their vertices untextured in the material's
+/// colour and are reported ([`ImportReport::textures_not_used`], `missing_files`,
+/// `unreadable_images`) with a warning.
 pub fn read_mesh(path: &Path, visitor: &mut dyn MeshVisitor) -> Result<ImportReport, MeshError> {
     use flate2::read::MultiGzDecoder;
     let io = |e| MeshError::io(path, e);

@@ -1,26 +1,67 @@
-//! Wavefront MTL material libraries, as far as Tessera uses them today: each material's
+//! Wavefront MTL material libraries, as far as Tessera uses them: each material's
 //! diffuse colour `Kd` becomes the colour of the faces that use it (times any `v x y z r
-//! g b` vertex colour), so a multi-material model keeps its colours. Diffuse textures
-//! (`map_Kd`) are not carried by the build yet: they are named in
-//! [`crate::ImportReport::textures_not_used`] and one warning (with the images that are
-//! missing on disk), and their faces are drawn in `Kd`, so a model is never silently
-//! black. `Kd` is taken as display values (like the sRGB bytes of a PLY), as OBJ viewers
-//! show it.
+//! g b` vertex colour), so a multi-material model keeps its colours; its diffuse texture
+//! `map_Kd` becomes a [`crate::TextureSource`] that the vertices of its faces sample
+//! (with `Kd` as the fallback colour; the image is not tinted by it). `Kd` is taken as display values
+//! (like the sRGB bytes of a PLY), as OBJ viewers show it.
+//!
+//! Of `map_Kd`'s options, `-clamp on` sets the wrap mode, `-o u v` and `-s u v` (offset
+//! and scale of the texture) are applied to the UVs (`u' = s u + o`, as three.js and
+//! Blender read them, and as `KHR_texture_transform` is applied to glTF's UVs); the
+//! others (`-bm`, `-mm`, `-t`, `-blendu`, ...) do not change which texel a vertex
+//! samples and are ignored. Images are looked up relative to the library's directory,
+//! names may hold spaces; their headers are read (for their size) once per image.
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
-use crate::ImportReport;
+use crate::image_probe::{probe_file, ProbeError};
+use crate::{ImageSource, ImportReport, TextureSource, Wrap};
 
 /// One material of a library.
 #[derive(Clone, Debug, PartialEq)]
 pub(crate) struct Material {
     /// Diffuse colour, 0..1 (white when the library gives none).
     pub kd: [f32; 3],
-    /// The `map_Kd` image as written (relative to the library's directory).
-    pub map_kd: Option<String>,
-    /// Where `map_Kd` resolves, and whether a file is there.
-    pub map_kd_path: Option<(PathBuf, bool)>,
+    /// The diffuse texture.
+    pub map_kd: Option<MapKd>,
+}
+
+/// A `map_Kd` statement.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct MapKd {
+    /// The image as written (relative to the library's directory).
+    pub name: String,
+    /// Where it resolves.
+    pub path: PathBuf,
+    /// `-clamp on`.
+    pub clamp: bool,
+    /// `-s su sv` and `-o ou ov` as `[su, sv, ou, ov]` (`u' = su u + ou`), `None` when
+    /// they change nothing.
+    pub uv_transform: Option<[f32; 4]>,
+}
+
+impl MapKd {
+    /// `uv` through the `-o` / `-s` options.
+    pub fn transform(&self, uv: [f32; 2]) -> [f32; 2] {
+        match self.uv_transform {
+            Some([su, sv, ou, ov]) => [su * uv[0] + ou, sv * uv[1] + ov],
+            None => uv,
+        }
+    }
+}
+
+/// What reading an image's header gave.
+#[derive(Clone, Debug)]
+pub(crate) enum ImageState {
+    /// Its width and height.
+    Size([u32; 2]),
+    /// No file there (or it cannot be opened): the message.
+    Missing(String),
+    /// An image format other than PNG or JPEG: the message.
+    Unsupported(String),
+    /// The file is there, its header does not read: why.
+    Unreadable(String),
 }
 
 impl Material {
@@ -39,6 +80,28 @@ impl Material {
     pub fn is_white(&self) -> bool {
         self.kd.iter().all(|&c| c >= 1.0)
     }
+
+    /// The texture of material `name` whose image is `size` big.
+    pub fn texture_source(&self, name: &str, size: [u32; 2]) -> Option<TextureSource> {
+        let map = self.map_kd.as_ref()?;
+        Some(TextureSource {
+            material: name.to_string(),
+            image: ImageSource::File(map.path.clone()),
+            image_name: map.name.clone(),
+            // The image as it is: `Kd` beside a `map_Kd` is mostly an exporter's default
+            // (Blender writes 0.64, 0.8 squared), and Blender's and MeshLab's importers
+            // show the image unmodified; scans must keep their measured colours. `Kd`
+            // stays the colour of the material's faces where the image is not used.
+            tint: [255; 4],
+            wrap: [if map.clamp {
+                Wrap::ClampToEdge
+            } else {
+                Wrap::Repeat
+            }; 2],
+            v_up: true,
+            size,
+        })
+    }
 }
 
 /// The materials of every library an OBJ names, by name (a later library or a later
@@ -46,6 +109,8 @@ impl Material {
 #[derive(Debug, Default)]
 pub(crate) struct Library {
     pub materials: HashMap<String, Material>,
+    /// Images whose header was read, by path.
+    images: HashMap<PathBuf, ImageState>,
 }
 
 impl Library {
@@ -93,7 +158,6 @@ impl Library {
                         Material {
                             kd: [1.0; 3],
                             map_kd: None,
-                            map_kd_path: None,
                         },
                     );
                     current = Some(name);
@@ -118,11 +182,13 @@ impl Library {
                     let Some(m) = current.as_ref().and_then(|n| self.materials.get_mut(n)) else {
                         continue;
                     };
-                    if let Some(image) = map_file_name(rest) {
-                        let p = dir.join(&image);
-                        let exists = p.is_file();
-                        m.map_kd = Some(image);
-                        m.map_kd_path = Some((p, exists));
+                    if let Some((name, options)) = parse_map(rest) {
+                        m.map_kd = Some(MapKd {
+                            path: dir.join(&name),
+                            name,
+                            clamp: options.clamp,
+                            uv_transform: options.uv_transform(),
+                        });
                     }
                 }
                 _ => {}
@@ -130,39 +196,79 @@ impl Library {
         }
     }
 
-    /// One warning naming the textured materials among `used` (their images are not
-    /// used yet), saying which images are missing on disk; the names go to `report`.
-    pub fn warn_textures(&self, obj: &Path, used: &[String], report: &mut ImportReport) {
-        let mut missing = Vec::new();
-        for name in used {
-            let Some(m) = self.materials.get(name) else {
-                continue;
-            };
-            let (Some(image), Some((path, exists))) = (&m.map_kd, &m.map_kd_path) else {
-                continue;
-            };
-            report
-                .textures_not_used
-                .push(format!("{name} (image '{image}')"));
-            if !exists {
-                missing.push(path.display().to_string());
-                report.missing_files.push(path.display().to_string());
-            }
+    /// What the header of `path` gives, read the first time it is asked for.
+    pub fn image(&mut self, path: &Path) -> &ImageState {
+        self.images
+            .entry(path.to_path_buf())
+            .or_insert_with(|| match probe_file(path) {
+                Ok(size) => ImageState::Size(size),
+                Err(e @ ProbeError::Missing(_)) => ImageState::Missing(e.to_string()),
+                Err(e @ ProbeError::Unsupported(_)) => ImageState::Unsupported(e.to_string()),
+                Err(e) => ImageState::Unreadable(e.to_string()),
+            })
+    }
+
+    /// The image size of material `name` when it is textured and its image reads.
+    pub fn texture_size(&mut self, name: &str) -> Option<[u32; 2]> {
+        let path = self.materials.get(name)?.map_kd.as_ref()?.path.clone();
+        match self.image(&path) {
+            ImageState::Size(s) => Some(*s),
+            _ => None,
         }
-        let n = report.textures_not_used.len();
-        if n > 0 {
-            let s = if n > 1 { "s" } else { "" };
+    }
+
+    /// Report the images of the textured materials among `used` that are missing,
+    /// unreadable or in another format (each image once, one warning per kind), and the
+    /// faces of textured materials without texture coordinates.
+    pub fn warn_textures(&mut self, obj: &Path, used: &[String], report: &mut ImportReport) {
+        let mut missing = Vec::new();
+        let mut unreadable = Vec::new();
+        let mut seen = Vec::new();
+        for name in used {
+            let Some(map) = self.materials.get(name).and_then(|m| m.map_kd.clone()) else {
+                continue;
+            };
+            let shown = map.path.display().to_string();
+            match self.image(&map.path).clone() {
+                ImageState::Size(_) => {}
+                ImageState::Unsupported(why) => report
+                    .textures_not_used
+                    .push(format!("{name} (image '{}'): {why}", map.name)),
+                _ if seen.contains(&map.path) => {}
+                ImageState::Missing(why) => {
+                    missing.push(format!("{shown} ({why})"));
+                    report.missing_files.push(shown);
+                }
+                ImageState::Unreadable(why) => {
+                    unreadable.push(format!("{shown} ({why})"));
+                    report.unreadable_images.push(shown);
+                }
+            }
+            seen.push(map.path);
+        }
+        let p = obj.display();
+        if !report.textures_not_used.is_empty() {
             tracing::warn!(
-                "{}: textures are not used yet: the image{s} of {n} textured material{s} ignored: {}; drawn in the material's Kd colour, UVs kept",
-                obj.display(),
+                "{p}: texture image(s) not used: {}; drawn in the material's Kd colour, UVs kept",
                 report.textures_not_used.join(", "),
             );
         }
         if !missing.is_empty() {
             tracing::warn!(
-                "{}: texture image(s) missing: {}",
-                obj.display(),
+                "{p}: texture image(s) missing: {}; drawn in the material's Kd colour, UVs kept",
                 missing.join(", ")
+            );
+        }
+        if !unreadable.is_empty() {
+            tracing::warn!(
+                "{p}: texture image(s) whose header cannot be read: {}; drawn in the material's Kd colour, UVs kept",
+                unreadable.join(", ")
+            );
+        }
+        if report.untextured_faces > 0 {
+            tracing::warn!(
+                "{p}: {} face(s) of textured materials have no texture coordinates (vt) on every corner: drawn untextured, in the material's Kd colour",
+                report.untextured_faces
             );
         }
     }
@@ -179,10 +285,34 @@ fn library_files(dir: &Path, rest: &str) -> Vec<PathBuf> {
     rest.split_ascii_whitespace().map(|w| dir.join(w)).collect()
 }
 
-/// The image of a `map_Kd` statement: what follows its options (`-o u v w`, `-s u v w`,
-/// `-bm 1`, `-clamp on`, ...). Options take a fixed number of arguments; the file name
-/// is the rest of the line (it may hold spaces).
-fn map_file_name(rest: &str) -> Option<String> {
+/// The options of a `map_Kd` statement that change how the image is sampled.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct MapOptions {
+    clamp: bool,
+    /// `-o u v w` (0 where not given).
+    offset: [f32; 3],
+    /// `-s u v w` (1 where not given).
+    scale: [f32; 3],
+}
+
+impl MapOptions {
+    /// `[su, sv, ou, ov]`, `None` for the identity (w, the third coordinate of 3D
+    /// textures, is ignored).
+    fn uv_transform(&self) -> Option<[f32; 4]> {
+        let t = [self.scale[0], self.scale[1], self.offset[0], self.offset[1]];
+        (t != [1.0, 1.0, 0.0, 0.0] && t.iter().all(|x| x.is_finite())).then_some(t)
+    }
+}
+
+/// The image of a `map_Kd` statement and its options (`-o u v w`, `-s u v w`, `-bm 1`,
+/// `-clamp on`, ...). Options take a fixed number of arguments (`-o`, `-s` and `-t` up to
+/// three numbers); the file name is the rest of the line (it may hold spaces).
+fn parse_map(rest: &str) -> Option<(String, MapOptions)> {
+    let mut options = MapOptions {
+        clamp: false,
+        offset: [0.0; 3],
+        scale: [1.0; 3],
+    };
     let mut words = rest.split_ascii_whitespace().peekable();
     let mut consumed = 0usize;
     while let Some(&w) = words.peek() {
@@ -196,14 +326,27 @@ fn map_file_name(rest: &str) -> Option<String> {
         words.next();
         consumed += 1;
         // `-o u [v [w]]`: take numeric arguments up to the count.
+        let mut numbers = Vec::new();
         for _ in 0..args {
             match words.peek() {
                 Some(a) if args == 1 || a.parse::<f32>().is_ok() => {
+                    if w == "-clamp" {
+                        options.clamp = *a == "on";
+                    }
+                    numbers.extend(a.parse::<f32>().ok());
                     words.next();
                     consumed += 1;
                 }
                 _ => break,
             }
+        }
+        let target = match w {
+            "-o" => &mut options.offset,
+            "-s" => &mut options.scale,
+            _ => continue,
+        };
+        for (slot, x) in target.iter_mut().zip(numbers) {
+            *slot = x;
         }
     }
     // The rest of the line after the consumed words, spaces inside kept.
@@ -215,12 +358,16 @@ fn map_file_name(rest: &str) -> Option<String> {
             .map_or("", |(_, r)| r);
     }
     let s = s.trim();
-    (!s.is_empty()).then(|| s.to_string())
+    (!s.is_empty()).then(|| (s.to_string(), options))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn map_file_name(rest: &str) -> Option<String> {
+        parse_map(rest).map(|(name, _)| name)
+    }
 
     #[test]
     fn map_kd_options_are_skipped_and_spaces_kept() {
@@ -238,6 +385,27 @@ mod tests {
     }
 
     #[test]
+    fn map_kd_clamp_offset_and_scale_are_read() {
+        let (_, o) = parse_map("-clamp on -bm 0.5 a.png").unwrap();
+        assert!(o.clamp);
+        assert_eq!(o.uv_transform(), None);
+        let (_, o) = parse_map("-clamp off a.png").unwrap();
+        assert!(!o.clamp);
+        let (name, o) = parse_map("-s 2 3 1 -o 0.5 b c.png").unwrap();
+        assert_eq!(name, "b c.png");
+        assert_eq!(o.uv_transform(), Some([2.0, 3.0, 0.5, 0.0]));
+        let (_, o) = parse_map("-s 1 1 1 -o 0 0 0 d.png").unwrap();
+        assert_eq!(o.uv_transform(), None);
+        let map = MapKd {
+            name: String::new(),
+            path: PathBuf::new(),
+            clamp: false,
+            uv_transform: Some([2.0, 3.0, 0.5, 0.0]),
+        };
+        assert_eq!(map.transform([1.0, 1.0]), [2.5, 3.0]);
+    }
+
+    #[test]
     fn kd_tints_and_defaults_to_white() {
         let mut lib = Library::default();
         lib.parse(
@@ -249,10 +417,14 @@ mod tests {
         assert_eq!(lib.materials["grey"].kd, [0.5; 3]);
         let plain = &lib.materials["plain"];
         assert!(plain.is_white());
-        assert_eq!(plain.map_kd.as_deref(), Some("t.png"));
-        assert_eq!(
-            plain.map_kd_path,
-            Some((PathBuf::from("/nowhere/t.png"), false))
-        );
+        let map = plain.map_kd.as_ref().unwrap();
+        assert_eq!(map.name, "t.png");
+        assert_eq!(map.path, PathBuf::from("/nowhere/t.png"));
+        assert!(!map.clamp);
+        assert!(matches!(
+            lib.image(Path::new("/nowhere/t.png")),
+            ImageState::Missing(_)
+        ));
+        assert_eq!(lib.texture_size("plain"), None);
     }
 }

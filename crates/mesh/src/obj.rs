@@ -21,8 +21,19 @@
 //! at the top) are read ([`crate::mtl`]). When a material has a diffuse colour `Kd`
 //! other than white, faces take their `usemtl` material's `Kd` (times the vertex colour):
 //! the reader then works in combined mode with the material in each combination, so a
-//! position shared by two materials becomes two vertices. Textures (`map_Kd`) are not
-//! carried yet (named in a warning); a missing library or image is a warning.
+//! position shared by two materials becomes two vertices.
+//!
+//! Textures: the vertices of a face with texture coordinates whose material has a
+//! `map_Kd` image (PNG or JPEG, whose header reads) sample it: `Vertex::texture` is the
+//! index of the material's [`crate::TextureSource`] in the report, its UVs are the file's
+//! (through `map_Kd`'s `-o` / `-s`), its colour `Kd` x the vertex colour (the fallback).
+//! Combinations then key the material too (textured and untextured vertices are never
+//! one vertex). A face of a textured material without `vt` on every corner is untextured
+//! (counted, a warning); a missing library or image, an unreadable image, is a warning.
+//! Whether any vertex will be textured is known before the first vertex (the header
+//! says it): when some material is textured, one more pass over the line prefixes looks
+//! for a face with texture coordinates under a textured material whose image reads
+//! (stopping at the first, which exporters write near the top).
 
 use std::collections::HashMap;
 use std::fs::File;
@@ -32,7 +43,7 @@ use std::path::Path;
 use crate::common::{finish_report, note_ignored, PolygonEmitter};
 use crate::mtl::{Library, Material};
 use crate::source::{ReadErr, Source};
-use crate::{Attributes, ImportReport, MeshError, MeshHeader, MeshVisitor, Vertex};
+use crate::{Attributes, ImportReport, MeshError, MeshHeader, MeshVisitor, Vertex, NO_TEXTURE};
 
 /// Longest (joined) line accepted: a polygon with ~a million corners.
 const MAX_LINE: usize = 16 << 20;
@@ -60,28 +71,37 @@ pub(crate) fn read_obj_from<R: Read>(
 ) -> Result<ImportReport, MeshError> {
     let scan = prescan(path, open()?)?;
     let mut report = ImportReport::default();
-    let library = Library::load(path, &scan.mtllibs, &mut report);
+    let mut library = Library::load(path, &scan.mtllibs, &mut report);
     let material_colors = library.materials.values().any(|m| !m.is_white());
+    let map_kd = library.materials.values().any(|m| m.map_kd.is_some());
+    // Only faces with texture coordinates sample a texture; the pass stops at the first.
+    let textures = scan.uses_vt && map_kd && texture_scan(path, open()?, &mut library)?;
     let attributes = Attributes {
         normals: scan.uses_vn,
         colors: scan.colors || material_colors,
         uvs: scan.uses_vt,
+        textures,
     };
     visitor.header(&MeshHeader {
         attributes,
         vertex_count: None,
         face_count: None,
     })?;
-    let combined = scan.uses_vt || scan.uses_vn || material_colors;
+    // Materials tell vertices apart when they colour them, or (with UVs) when they may
+    // texture them or transform their UVs.
+    let key_materials = material_colors || (scan.uses_vt && map_kd);
+    let combined = scan.uses_vt || scan.uses_vn || key_materials;
     let mut reader = ObjReader::new(path, combined);
     reader.report = report;
     reader.vertex_colors = scan.colors;
     reader.library = library;
-    reader.material_colors = material_colors;
+    reader.key_materials = key_materials;
+    reader.textures = textures;
     let mut src = Source::new(open()?);
     let mut line = Vec::new();
     let mut last_statement = false;
-    while reader.next_line(&mut src, &mut line)? {
+    let mut part = Vec::new();
+    while reader.next_line(&mut src, &mut line, &mut part)? {
         reader.statement(&line, visitor)?;
         last_statement = !line.trim_ascii().is_empty();
     }
@@ -91,6 +111,7 @@ pub(crate) fn read_obj_from<R: Read>(
     reader
         .library
         .warn_textures(path, &reader.used_materials, &mut reader.report);
+
     if !reader.report.unknown_materials.is_empty() {
         let names: Vec<String> = reader
             .report
@@ -169,6 +190,80 @@ fn prescan<R: Read>(path: &Path, reader: R) -> Result<Scan, MeshError> {
     }
 }
 
+/// Whether some face with texture coordinates on every corner lies under a textured
+/// material whose image reads, i.e. whether some vertex will sample a texture. Reads
+/// logical lines (continuations joined) up to the first such face.
+fn texture_scan<R: Read>(path: &Path, reader: R, library: &mut Library) -> Result<bool, MeshError> {
+    let mut src = Source::new(reader);
+    let (mut line, mut part) = (Vec::new(), Vec::new());
+    let mut textured = false;
+    while logical_line(path, &mut src, &mut line, &mut part)?.is_some() {
+        // As `ObjReader::statement` reads the line.
+        let mut w = words(&line);
+        match w.next() {
+            Some(b"usemtl") => textured = library.texture_size(&usemtl_name(&line)).is_some(),
+            Some(b"f" | b"fo") if textured => {
+                let mut corners = w.peekable();
+                if corners.peek().is_some()
+                    && corners.all(|c| {
+                        c.split(|&b| b == b'/')
+                            .nth(1)
+                            .is_some_and(|vt| !vt.is_empty())
+                    })
+                {
+                    return Ok(true);
+                }
+            }
+            _ => {}
+        }
+    }
+    Ok(false)
+}
+
+/// The name of a `usemtl NAME` statement (the rest of the line: names may hold spaces).
+fn usemtl_name(line: &[u8]) -> String {
+    let rest = line.trim_ascii();
+    String::from_utf8_lossy(rest.get(6..).unwrap_or(&[]).trim_ascii()).into_owned()
+}
+
+/// Read the next logical line into `line` (joining `\` continuations; `part` is
+/// scratch), its comment stripped. Returns the number of its first physical line, `None`
+/// at the end of the file.
+fn logical_line<R: Read>(
+    path: &Path,
+    src: &mut Source<R>,
+    line: &mut Vec<u8>,
+    part: &mut Vec<u8>,
+) -> Result<Option<u64>, MeshError> {
+    let mut first = None;
+    line.clear();
+    loop {
+        let more = src
+            .line_into(part, MAX_LINE)
+            .map_err(|e| read_error(path, src, e))?;
+        if !more {
+            return Ok(first);
+        }
+        let no = *first.get_or_insert(src.line.saturating_sub(1));
+        match part.strip_suffix(b"\\") {
+            Some(head) => line.extend_from_slice(head),
+            None => {
+                line.extend_from_slice(part);
+                let keep = strip_comment(line).len();
+                line.truncate(keep);
+                return Ok(first);
+            }
+        }
+        if line.len() > MAX_LINE {
+            return Err(MeshError::malformed(
+                path,
+                format!("line {no}"),
+                format!("line longer than {MAX_LINE} bytes"),
+            ));
+        }
+    }
+}
+
 fn read_error<R: Read>(path: &Path, src: &Source<R>, e: ReadErr) -> MeshError {
     match e {
         ReadErr::Io(e) => MeshError::io(path, e),
@@ -230,14 +325,29 @@ struct ObjReader<'p> {
     /// `v` statements carry colours.
     vertex_colors: bool,
     library: Library,
-    /// Materials colour the faces (some `Kd` is not white).
-    material_colors: bool,
+    /// Combinations key the material (it colours the faces, or textures them).
+    key_materials: bool,
     /// The materials of the `usemtl` names met, by index; the current one.
-    materials: Vec<Material>,
+    materials: Vec<UsedMaterial>,
     material_index: HashMap<String, u32>,
     current_material: u32,
     /// Names of the materials `usemtl` chose, in order of first use.
     used_materials: Vec<String>,
+    /// The corners of the face being read.
+    parsed: Vec<(u32, u32, u32)>,
+    /// The header says some vertex is textured: faces may be (else none is, whatever
+    /// the second pass meets: it cannot contradict the header).
+    textures: bool,
+}
+
+/// A material `usemtl` chose.
+struct UsedMaterial {
+    name: String,
+    material: Material,
+    /// The image size, when the material is textured and its image reads.
+    texture_size: Option<[u32; 2]>,
+    /// Its index in `ImportReport::textures`, once a vertex samples it.
+    texture: Option<u32>,
 }
 
 impl<'p> ObjReader<'p> {
@@ -255,11 +365,13 @@ impl<'p> ObjReader<'p> {
             report: ImportReport::default(),
             vertex_colors: false,
             library: Library::default(),
-            material_colors: false,
+            key_materials: false,
             materials: Vec::new(),
             material_index: HashMap::new(),
             current_material: NONE,
             used_materials: Vec::new(),
+            parsed: Vec::new(),
+            textures: false,
         }
     }
 
@@ -268,33 +380,14 @@ impl<'p> ObjReader<'p> {
         &mut self,
         src: &mut Source<R>,
         line: &mut Vec<u8>,
+        part: &mut Vec<u8>,
     ) -> Result<bool, MeshError> {
-        let mut part = Vec::new();
-        let mut any = false;
-        line.clear();
-        loop {
-            let more = src
-                .line_into(&mut part, MAX_LINE)
-                .map_err(|e| read_error(self.path, src, e))?;
-            if !more {
-                return Ok(any);
+        match logical_line(self.path, src, line, part)? {
+            Some(no) => {
+                self.line_no = no;
+                Ok(true)
             }
-            if !any {
-                self.line_no = src.line.saturating_sub(1);
-            }
-            any = true;
-            match part.strip_suffix(b"\\") {
-                Some(head) => line.extend_from_slice(head),
-                None => {
-                    line.extend_from_slice(&part);
-                    let keep = strip_comment(line).len();
-                    line.truncate(keep);
-                    return Ok(true);
-                }
-            }
-            if line.len() > MAX_LINE {
-                return Err(self.malformed(format!("line longer than {MAX_LINE} bytes")));
-            }
+            None => Ok(false),
         }
     }
 
@@ -330,16 +423,21 @@ impl<'p> ObjReader<'p> {
 
     /// `usemtl NAME` (the rest of the line: names may hold spaces).
     fn use_material(&mut self, line: &[u8]) {
-        let rest = line.trim_ascii();
-        let name = String::from_utf8_lossy(rest.get(6..).unwrap_or(&[]).trim_ascii()).into_owned();
+        let name = usemtl_name(line);
         if let Some(&i) = self.material_index.get(&name) {
             self.current_material = i;
             return;
         }
-        match self.library.materials.get(&name) {
-            Some(m) => {
+        match self.library.materials.get(&name).cloned() {
+            Some(material) => {
                 let i = self.materials.len() as u32;
-                self.materials.push(m.clone());
+                let texture_size = self.library.texture_size(&name);
+                self.materials.push(UsedMaterial {
+                    name: name.clone(),
+                    material,
+                    texture_size,
+                    texture: None,
+                });
                 self.material_index.insert(name.clone(), i);
                 self.used_materials.push(name);
                 self.current_material = i;
@@ -489,15 +587,65 @@ impl<'p> ObjReader<'p> {
         corners: &mut Vec<u32>,
         visitor: &mut dyn MeshVisitor,
     ) -> Result<(), MeshError> {
+        let mut parsed = std::mem::take(&mut self.parsed);
+        parsed.clear();
+        let result = self.face_vertices(w, &mut parsed, corners, visitor);
+        self.parsed = parsed;
+        result
+    }
+
+    fn face_vertices<'a>(
+        &mut self,
+        w: impl Iterator<Item = &'a [u8]>,
+        parsed: &mut Vec<(u32, u32, u32)>,
+        corners: &mut Vec<u32>,
+        visitor: &mut dyn MeshVisitor,
+    ) -> Result<(), MeshError> {
         for corner in w {
-            let (v, vt, vn) = self.parse_corner(corner)?;
+            parsed.push(self.parse_corner(corner)?);
+        }
+        let material = self.materials.get(self.current_material as usize);
+        let map_kd = material.is_some_and(|m| m.material.map_kd.is_some());
+        let all_vt = parsed.iter().all(|&(_, vt, _)| vt != NONE);
+        if map_kd && !all_vt && parsed.len() >= 3 {
+            self.report.untextured_faces += 1;
+        }
+        let readable = self.textures && material.is_some_and(|m| m.texture_size.is_some());
+        // A face of a textured material with `vt` on some corners only is untextured:
+        // its corners drop their `vt`, so they cannot be one vertex with the textured
+        // corners of other faces.
+        let (textured, drop_vt) = (readable && all_vt, readable && !all_vt);
+        for &(v, vt, vn) in parsed.iter() {
             let index = match self.combined.is_some() {
-                true => self.combined_vertex(v, vt, vn, visitor)?,
+                true => {
+                    let vt = if drop_vt { NONE } else { vt };
+                    self.combined_vertex(v, vt, vn, textured, visitor)?
+                }
                 false => v,
             };
             corners.push(index);
         }
         Ok(())
+    }
+
+    /// The texture index of material `material`, its `TextureSource` made the first time.
+    fn texture_of(&mut self, material: u32) -> u32 {
+        let Some(m) = self.materials.get_mut(material as usize) else {
+            return NO_TEXTURE;
+        };
+        if let Some(t) = m.texture {
+            return t;
+        }
+        let (Some(size), Ok(t)) = (m.texture_size, u32::try_from(self.report.textures.len()))
+        else {
+            return NO_TEXTURE;
+        };
+        let Some(source) = m.material.texture_source(&m.name, size) else {
+            return NO_TEXTURE;
+        };
+        self.report.textures.push(source);
+        m.texture = Some(t);
+        t
     }
 
     /// Resolve `v[/vt][/vn]` into 0-based indices (`NONE` when absent).
@@ -556,25 +704,38 @@ impl<'p> ObjReader<'p> {
         }
     }
 
-    /// The output index of the (v, vt, vn) combination, delivering it the first time.
+    /// The output index of the (v, vt, vn) combination, delivering it the first time;
+    /// `textured`: it samples the current material's texture.
     fn combined_vertex(
         &mut self,
         v: u32,
         vt: u32,
         vn: u32,
+        textured: bool,
         visitor: &mut dyn MeshVisitor,
     ) -> Result<u32, MeshError> {
-        let Some(c) = &self.combined else {
-            return Ok(v);
-        };
-        let material = if self.material_colors {
+        let material = if self.key_materials {
             self.current_material
         } else {
             NONE
         };
+        let Some(c) = &self.combined else {
+            return Ok(v);
+        };
         if let Some(&i) = c.map.get(&[v, vt, vn, material]) {
             return Ok(i);
         }
+        // A vertex of a textured material whose image reads is textured when its face has
+        // `vt` on every corner (the others dropped theirs): keyed by the material, it
+        // is never one vertex with an untextured one.
+        let texture = match textured {
+            true => self.texture_of(material),
+            false => NO_TEXTURE,
+        };
+        let Some(c) = &self.combined else {
+            return Ok(v);
+        };
+        let used = self.materials.get(material as usize);
         // `resolve` checked every index against the table lengths.
         let get = |table: &[[f32; 3]], i: u32| table.get(i as usize).copied().unwrap_or_default();
         let vertex = Vertex {
@@ -586,12 +747,19 @@ impl<'p> ObjReader<'p> {
             },
             color: {
                 let own = c.colors.get(v as usize).copied().unwrap_or([255; 4]);
-                match self.materials.get(material as usize) {
-                    Some(m) => m.tint(own),
+                match used {
+                    Some(m) => m.material.tint(own),
                     None => own,
                 }
             },
-            uv: c.uvs.get(vt as usize).copied().unwrap_or_default(),
+            uv: {
+                let uv = c.uvs.get(vt as usize).copied().unwrap_or_default();
+                match used.and_then(|m| m.material.map_kd.as_ref()) {
+                    Some(map) if vt != NONE => map.transform(uv),
+                    _ => uv,
+                }
+            },
+            texture,
         };
         let index = self.deliver(&vertex, visitor)?;
         if let Some(c) = &mut self.combined {

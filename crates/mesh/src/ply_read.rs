@@ -452,6 +452,7 @@ impl VertexPlan {
             normals: taken[NX..NX + 3].iter().all(|&t| t),
             colors: taken[R..R + 3].iter().all(|&t| t),
             uvs: taken[U..U + 2].iter().all(|&t| t),
+            textures: false,
         };
         // An incomplete group (say nx, ny without nz) is ignored entirely.
         let keep = |slot: usize| match slot {
@@ -806,6 +807,7 @@ fn make_vertex(vals: &[f64; SLOTS]) -> Vertex {
         normal: [f(3), f(4), f(5)],
         color: [c(6), c(7), c(8), c(9)],
         uv: [f(10), f(11)],
+        texture: crate::NO_TEXTURE,
     }
 }
 

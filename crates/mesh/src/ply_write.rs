@@ -20,7 +20,9 @@ const BUFFER_BYTES: usize = 1 << 20;
 /// What a [`PlyWriter`] will write: the header must be known before the first vertex.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct PlyWriterOptions {
-    /// Optional attributes to write per vertex (position is always written).
+    /// Optional attributes to write per vertex (position is always written). PLY has no
+    /// texture index: `textures` and [`Vertex::texture`] are ignored (the UVs are
+    /// written when `uvs` is set).
     pub attributes: Attributes,
     /// Exact number of vertices that will be written.
     pub vertex_count: u64,

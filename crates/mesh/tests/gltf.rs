@@ -8,9 +8,9 @@
 mod common;
 
 use base64::Engine as _;
-use common::{read_bytes, read_err, read_ok, Collect};
+use common::{jpeg, png, read_bytes, read_err, read_ok, Collect};
 use serde_json::{json, Value};
-use tessera_mesh::MeshError;
+use tessera_mesh::{ImageSource, MeshError, Wrap, NO_TEXTURE};
 
 const FLOAT: u32 = 5126;
 const UBYTE: u32 = 5121;
@@ -495,7 +495,7 @@ fn khr_mesh_quantization_is_undone_by_the_node_transform() {
 }
 
 #[test]
-fn khr_texture_transform_moves_uvs_and_textures_are_named_as_unused() {
+fn khr_texture_transform_moves_uvs_and_a_missing_image_is_reported() {
     let mut d = Doc::default();
     let p = d.positions(&TRI);
     let tv = d.view(
@@ -530,7 +530,20 @@ fn khr_texture_transform_moves_uvs_and_textures_are_named_as_unused() {
         "{:?}",
         c.vertices[1].uv
     );
-    assert_eq!(r.textures_not_used, ["skin (image 'photo.jpg')"]);
+    // The image is missing: a warning naming it, the vertices untextured.
+    assert!(r.textures_not_used.is_empty(), "{:?}", r.textures_not_used);
+    assert_eq!(r.missing_files.len(), 1);
+    assert!(
+        r.missing_files[0].ends_with("photo.jpg"),
+        "{:?}",
+        r.missing_files
+    );
+    assert!(r.textures.is_empty());
+    assert!(!c.headers[0].attributes.textures);
+    assert!(c
+        .vertices
+        .iter()
+        .all(|v| v.texture == tessera_mesh::NO_TEXTURE));
     // White factor, no COLOR_0: no colours at all (white, never black).
     assert!(!c.headers[0].attributes.colors);
     assert_eq!(c.vertices[0].color, [255; 4]);
@@ -993,4 +1006,283 @@ fn truncating_or_corrupting_a_glb_never_panics() {
             let _ = tessera_mesh::fuzzing::fuzz_gltf(&b);
         }
     }
+}
+
+// ---------------------------------------------------------------------------------------
+// Base colour textures (issue 11, appearance)
+// ---------------------------------------------------------------------------------------
+
+/// A document of `n` one-triangle primitives' data: positions, `TEXCOORD_0` and
+/// `TEXCOORD_1` accessors and indices (each shared by every primitive).
+fn textured_doc() -> (Doc, usize, usize, usize, usize) {
+    let mut d = Doc::default();
+    let p = d.positions(&TRI);
+    let uv = |d: &mut Doc, xs: [f32; 6]| {
+        let v = d.view(&xs.map(f32::to_le_bytes).concat(), None);
+        d.accessor(Some(v), FLOAT, "VEC2", 3, json!({}))
+    };
+    let t0 = uv(&mut d, [0.0, 0.0, 1.0, 0.0, 0.25, 1.5]);
+    let t1 = uv(&mut d, [0.5, 0.5, 0.5, 0.5, 0.5, 0.5]);
+    let i = d.indices_u16(&[0, 1, 2]);
+    (d, p, t0, t1, i)
+}
+
+/// Write `bytes` as `name` beside `files` (name, contents) in a temp dir and read it.
+fn read_in_dir(
+    name: &str,
+    bytes: &[u8],
+    files: &[(&str, &[u8])],
+) -> (tessera_mesh::ImportReport, Collect, tempfile::TempDir) {
+    let dir = tempfile::tempdir().unwrap();
+    for (n, b) in files {
+        let p = dir.path().join(n);
+        std::fs::create_dir_all(p.parent().unwrap()).unwrap();
+        std::fs::write(p, b).unwrap();
+    }
+    let path = dir.path().join(name);
+    std::fs::write(&path, bytes).unwrap();
+    let mut c = Collect::default();
+    let r = tessera_mesh::read_mesh(&path, &mut c).unwrap_or_else(|e| panic!("{name}: {e}"));
+    (r, c, dir)
+}
+
+fn b64(bytes: &[u8]) -> String {
+    base64::engine::general_purpose::STANDARD.encode(bytes)
+}
+
+/// Two materials sample one external PNG (its name percent-encoded, with a space) through
+/// two textures, one with a sampler's wrap modes, one with `KHR_texture_transform`; a
+/// third material is untextured. The vertices carry their texture's index, their UVs as
+/// the file gives them (not flipped, only transformed), their colour the factor.
+#[test]
+fn base_colour_textures_of_an_external_png_with_samplers() {
+    let (d, p, t0, _, i) = textured_doc();
+    let prim = |m: u32| json!({"attributes": {"POSITION": p, "TEXCOORD_0": t0}, "indices": i, "material": m});
+    let mut rest = one_node(
+        json!([{"primitives": [prim(0), prim(1), prim(2)]}]),
+        json!({}),
+    );
+    rest["materials"] = json!([
+        {"name": "bark", "pbrMetallicRoughness": {"baseColorFactor": [1.0, 0.5, 1.0, 1.0],
+            "baseColorTexture": {"index": 0}}},
+        {"name": "bark moved", "pbrMetallicRoughness": {"baseColorTexture": {"index": 1,
+            "extensions": {"KHR_texture_transform": {"offset": [0.5, 0.0]}}}}},
+        {"name": "red", "pbrMetallicRoughness": {"baseColorFactor": [1.0, 0.0, 0.0, 1.0]}},
+    ]);
+    rest["samplers"] = json!([{"wrapS": 33071, "wrapT": 33648}]);
+    rest["textures"] = json!([{"source": 0, "sampler": 0}, {"source": 0}]);
+    rest["images"] = json!([{"uri": "tex/my%20bark.png"}]);
+    rest["extensionsUsed"] = json!(["KHR_texture_transform"]);
+    let image = png(6, 10);
+    let (r, c, dir) = read_in_dir("bark.gltf", &d.gltf(rest), &[("tex/my bark.png", &image)]);
+    assert!(r.textures_not_used.is_empty(), "{:?}", r.textures_not_used);
+    assert!(r.missing_files.is_empty() && r.unreadable_images.is_empty());
+    let h = c.headers[0].attributes;
+    assert!(h.textures && h.uvs && h.colors);
+    assert_eq!(r.textures.len(), 2);
+    let (a, b) = (&r.textures[0], &r.textures[1]);
+    assert_eq!(a.material, "bark");
+    assert_eq!(
+        a.image,
+        ImageSource::File(dir.path().join("tex/my bark.png"))
+    );
+    assert_eq!(a.image_name, "tex/my%20bark.png");
+    assert_eq!(a.size, [6, 10]);
+    assert_eq!(a.wrap, [Wrap::ClampToEdge, Wrap::MirroredRepeat]);
+    assert!(!a.v_up);
+    assert_eq!(a.tint, [255, 188, 255, 255], "the factor, sRGB-encoded");
+    assert_eq!(b.material, "bark moved");
+    assert_eq!(b.image, a.image, "one image, two textures");
+    assert_eq!((b.wrap, b.tint), ([Wrap::Repeat; 2], [255; 4]));
+    let textures: Vec<u32> = c.vertices.iter().map(|v| v.texture).collect();
+    assert_eq!(
+        textures,
+        [0, 0, 0, 1, 1, 1, NO_TEXTURE, NO_TEXTURE, NO_TEXTURE]
+    );
+    let uvs: Vec<[f32; 2]> = c.vertices.iter().map(|v| v.uv).collect();
+    assert_eq!(uvs[..3], [[0.0, 0.0], [1.0, 0.0], [0.25, 1.5]]);
+    assert_eq!(uvs[3..6], [[0.5, 0.0], [1.5, 0.0], [0.75, 1.5]]);
+    assert_eq!(c.vertices[0].color, [255, 188, 255, 255]);
+    assert_eq!(c.vertices[6].color, [255, 0, 0, 255]);
+}
+
+/// An image in a `data:` URI is held in memory, keyed by its index.
+#[test]
+fn a_data_uri_image_is_held_in_memory() {
+    let (d, p, t0, _, i) = textured_doc();
+    let mut rest = one_node(
+        json!([{"primitives": [{"attributes": {"POSITION": p, "TEXCOORD_0": t0}, "indices": i, "material": 0}]}]),
+        json!({}),
+    );
+    let image = jpeg(9, 7);
+    rest["materials"] = json!([{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}]);
+    rest["textures"] = json!([{"source": 1}]);
+    rest["images"] = json!([
+        {"uri": "unused.png"},
+        {"uri": format!("data:image/jpeg;base64,{}", b64(&image))},
+    ]);
+    let (r, c) = read_ok("embedded.gltf", &d.gltf(rest));
+    assert_eq!(r.textures.len(), 1);
+    let t = &r.textures[0];
+    assert_eq!(t.material, "material 0");
+    assert_eq!(
+        t.image,
+        ImageSource::Memory {
+            key: "image 1".into(),
+            bytes: image.into()
+        }
+    );
+    assert_eq!(t.image_name, "image 1 (embedded)");
+    assert_eq!(t.size, [9, 7]);
+    assert!(c.vertices.iter().all(|v| v.texture == 0));
+    // The unused image is not looked for.
+    assert!(r.missing_files.is_empty());
+}
+
+/// An image in a buffer view: a byte range of the `.glb`, or of the external `.bin`, read
+/// back exactly; in a `data:` buffer, the bytes in memory.
+#[test]
+fn buffer_view_images_are_ranges_of_their_file() {
+    let (mut d, p, t0, _, i) = textured_doc();
+    let image = png(5, 3);
+    // An odd length before it, so the image starts unaligned within the chunk.
+    d.view(&[1, 2, 3], None);
+    let v = d.view(&image, None);
+    let mut rest = one_node(
+        json!([{"primitives": [{"attributes": {"POSITION": p, "TEXCOORD_0": t0}, "indices": i, "material": 0}]}]),
+        json!({}),
+    );
+    rest["materials"] =
+        json!([{"name": "m", "pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}]);
+    rest["textures"] = json!([{"source": 0}]);
+    rest["images"] = json!([{"bufferView": v, "mimeType": "image/png"}]);
+
+    let (r, c, dir) = read_in_dir("model.glb", &d.glb(rest.clone()), &[]);
+    assert!(c.headers[0].attributes.textures);
+    let t = &r.textures[0];
+    assert_eq!(
+        (t.size, t.image_name.as_str()),
+        ([5, 3], "image 0 (embedded)")
+    );
+    let ImageSource::FileRange { path, offset, len } = &t.image else {
+        panic!("{:?}", t.image);
+    };
+    assert_eq!(path, &dir.path().join("model.glb"));
+    let file = std::fs::read(path).unwrap();
+    assert_eq!(&file[*offset as usize..(offset + len) as usize], &image[..]);
+
+    // The same document with its buffer in a .bin beside a .gltf.
+    let root = d.root(
+        rest.clone(),
+        json!({"byteLength": d.bin.len(), "uri": "data%201.bin"}),
+    );
+    let (r, _, dir) = read_in_dir(
+        "model.gltf",
+        &serde_json::to_vec(&root).unwrap(),
+        &[("data 1.bin", &d.bin)],
+    );
+    let ImageSource::FileRange { path, offset, len } = &r.textures[0].image else {
+        panic!("{:?}", r.textures[0].image);
+    };
+    assert_eq!(path, &dir.path().join("data 1.bin"));
+    let file = std::fs::read(path).unwrap();
+    assert_eq!(&file[*offset as usize..(offset + len) as usize], &image[..]);
+
+    // A data: buffer: the view's bytes, in memory.
+    let (r, _) = read_ok("inline.gltf", &d.gltf(rest));
+    assert_eq!(
+        r.textures[0].image,
+        ImageSource::Memory {
+            key: "image 0".into(),
+            bytes: image.into()
+        }
+    );
+}
+
+/// What cannot be used is reported and left untextured: another texture coordinate set,
+/// WebP (by MIME type, or only through `EXT_texture_webp`), a missing file, a corrupt
+/// PNG, a primitive without `TEXCOORD_0`.
+#[test]
+fn textures_that_cannot_be_used_are_reported_and_drawn_untextured() {
+    let (mut d, p, t0, t1, i) = textured_doc();
+    let webp = d.view(b"RIFF\x10\0\0\0WEBPVP8 ", None);
+    let mut corrupt = png(4, 4);
+    corrupt.truncate(24);
+    let prim = |m: u32| json!({"attributes": {"POSITION": p, "TEXCOORD_0": t0, "TEXCOORD_1": t1}, "indices": i, "material": m});
+    let mut prims: Vec<Value> = (0..5).map(prim).collect();
+    prims.push(json!({"attributes": {"POSITION": p}, "indices": i, "material": 5}));
+    let mut rest = one_node(json!([{ "primitives": prims }]), json!({}));
+    let mat = |name: &str, t: u32, extra: Value| {
+        let mut info = json!({"index": t});
+        if let Value::Object(m) = extra {
+            for (k, v) in m {
+                info[k] = v;
+            }
+        }
+        json!({"name": name, "pbrMetallicRoughness": {"baseColorTexture": info}})
+    };
+    rest["materials"] = json!([
+        mat("second set", 0, json!({"texCoord": 1})),
+        mat("webp", 1, json!({})),
+        mat("webp only", 2, json!({})),
+        mat("gone", 3, json!({})),
+        mat("corrupt", 4, json!({})),
+        mat("no uvs", 0, json!({})),
+    ]);
+    rest["textures"] = json!([
+        {"source": 0},
+        {"source": 1},
+        {"extensions": {"EXT_texture_webp": {"source": 1}}},
+        {"source": 2},
+        {"source": 3},
+    ]);
+    rest["images"] = json!([
+        {"uri": format!("data:image/png;base64,{}", b64(&png(2, 2)))},
+        {"bufferView": webp, "mimeType": "image/webp"},
+        {"uri": "gone.png"},
+        {"uri": format!("data:image/png;base64,{}", b64(&corrupt))},
+    ]);
+    rest["extensionsUsed"] = json!(["EXT_texture_webp"]);
+    let (r, c, dir) = read_in_dir("bad.gltf", &d.gltf(rest.clone()), &[]);
+    assert!(r.textures.is_empty(), "{:?}", r.textures);
+    assert!(!c.headers[0].attributes.textures);
+    assert!(c.vertices.iter().all(|v| v.texture == NO_TEXTURE));
+    let not_used = &r.textures_not_used;
+    assert_eq!(not_used.len(), 4, "{not_used:?}");
+    assert!(
+        not_used[0].starts_with("second set (image 0): ") && not_used[0].contains("TEXCOORD_1"),
+        "{not_used:?}"
+    );
+    assert!(
+        not_used[1].starts_with("webp (image 1): ") && not_used[1].contains("image/webp"),
+        "{not_used:?}"
+    );
+    assert!(
+        not_used[2].starts_with("webp only (no image): ")
+            && not_used[2].contains("EXT_texture_webp"),
+        "{not_used:?}"
+    );
+    assert!(
+        not_used[3].starts_with("no uvs (image 0): ")
+            && not_used[3].contains("mesh 0 primitive 5 has no TEXCOORD_0"),
+        "{not_used:?}"
+    );
+    assert_eq!(
+        r.missing_files,
+        [dir.path().join("gone.png").display().to_string()]
+    );
+    assert_eq!(r.unreadable_images, ["image 3 (embedded)"]);
+    // The second set's UVs are still those it names.
+    assert_eq!(c.vertices[0].uv, [0.5, 0.5]);
+
+    // The fuzz entry point opens no file an image names: it is reported, not read.
+    let r = tessera_mesh::fuzzing::fuzz_gltf(&d.gltf(rest)).unwrap();
+    assert!(r.missing_files.is_empty());
+    assert!(
+        r.textures_not_used
+            .iter()
+            .any(|s| s.starts_with("gone (image 'gone.png'): ") && s.contains("may not open")),
+        "{:?}",
+        r.textures_not_used
+    );
 }

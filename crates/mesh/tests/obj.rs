@@ -3,7 +3,7 @@
 mod common;
 
 use common::*;
-use tessera_mesh::{read_mesh, Attributes, MeshError};
+use tessera_mesh::{read_mesh, Attributes, ImageSource, MeshError, Wrap, NO_TEXTURE};
 
 #[test]
 fn direct_mode_positions_only() {
@@ -73,7 +73,8 @@ f 1/1/1 2/2/1 3/3/1
         Attributes {
             normals: true,
             colors: false,
-            uvs: true
+            uvs: true,
+            textures: false,
         }
     );
     assert_eq!(r.vertices, 6, "two normals per position");
@@ -93,7 +94,8 @@ fn all_corner_syntaxes_and_relative_indices() {
         Attributes {
             normals: true,
             colors: false,
-            uvs: true
+            uvs: true,
+            textures: false,
         }
     );
     assert_eq!(r.triangles, 3);
@@ -275,7 +277,9 @@ fn read_with_files(
 ) -> (tessera_mesh::ImportReport, Collect, tempfile::TempDir) {
     let dir = tempfile::tempdir().unwrap();
     for (n, b) in others {
-        std::fs::write(dir.path().join(n), b).unwrap();
+        let p = dir.path().join(n);
+        std::fs::create_dir_all(p.parent().unwrap()).unwrap();
+        std::fs::write(p, b).unwrap();
     }
     let path = dir.path().join(name);
     std::fs::write(&path, obj).unwrap();
@@ -330,7 +334,9 @@ fn missing_materials_and_images_are_reported_and_the_model_kept() {
                vt 1 0\nvt 0 1\nusemtl photo\nf 1/1 2/2 3/3\nusemtl nosuch\nf 2/2 4/1 3/3\n";
     let (r, c, d) = read_with_files("p.obj", obj, &[("here.mtl", mtl.as_bytes())]);
     assert_eq!(c.triangles.len(), 2);
-    assert_eq!(r.textures_not_used, ["photo (image 'images/my photo.jpg')"]);
+    assert!(r.textures_not_used.is_empty(), "{:?}", r.textures_not_used);
+    assert!(r.textures.is_empty());
+    assert!(!c.headers[0].attributes.textures);
     let gone = d.path().join("gone.mtl").display().to_string();
     let image = d.path().join("images/my photo.jpg").display().to_string();
     assert_eq!(r.missing_files, [gone, image]);
@@ -344,4 +350,247 @@ fn missing_materials_and_images_are_reported_and_the_model_kept() {
         c.vertices[c.triangles[1][1] as usize].color,
         [255, 255, 255, 255]
     );
+}
+
+/// Issue 11 (appearance): two textured materials (one image in a directory whose name
+/// holds a space, clamped; one JPEG), a third sharing the first's image with `-s`/`-o`,
+/// and an untextured one. Each textured face's vertices carry their material's texture
+/// index and the file's UVs (v not flipped; the third's through its offset and scale);
+/// a position used by two materials is two vertices; a textured face without `vt` is
+/// untextured and counted.
+#[test]
+fn map_kd_textures_are_described_and_sampled_per_vertex() {
+    let mtl = "newmtl wood\nKd 0.5 0.5 0.5\nmap_Kd -clamp on -bm 1 tex dir/wood grain.png\n\
+               newmtl stone\nmap_Kd stone.jpg\n\
+               newmtl paint\nKd 1 0 0\n\
+               newmtl wood scaled\nmap_Kd -s 2 4 1 -o 0.5 0.25 0 tex dir/wood grain.png\n";
+    let obj = "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n\
+               vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nvt 0.25 0.75\n\
+               usemtl wood\nf 1/1 2/2 3/3\n\
+               usemtl stone\nf 1/1 3/3 4/5\n\
+               usemtl paint\nf 2/2 4/4 3/3\n\
+               usemtl wood scaled\nf 1/1 2/2 4/5\n\
+               usemtl wood\nf 1 3 4\nf 1/1 2/2 3/3\n";
+    let wood = png(8, 4);
+    let stone = jpeg(16, 2);
+    let (r, c, d) = read_with_files(
+        "t.obj",
+        obj,
+        &[
+            ("m.mtl", mtl.as_bytes()),
+            ("tex dir/wood grain.png", &wood),
+            ("stone.jpg", &stone),
+        ],
+    );
+    let h = &c.headers[0].attributes;
+    assert!(h.textures && h.uvs && h.colors);
+    assert!(r.missing_files.is_empty() && r.unreadable_images.is_empty());
+    assert!(r.textures_not_used.is_empty(), "{:?}", r.textures_not_used);
+    assert_eq!(r.untextured_faces, 1);
+    assert_eq!(r.textures.len(), 3, "{:?}", r.textures);
+    let (t0, t1, t2) = (&r.textures[0], &r.textures[1], &r.textures[2]);
+    let wood_path = d.path().join("tex dir/wood grain.png");
+    assert_eq!(t0.material, "wood");
+    assert_eq!(t0.image, ImageSource::File(wood_path.clone()));
+    assert_eq!(t0.image_name, "tex dir/wood grain.png");
+    assert_eq!(t0.tint, [255; 4], "OBJ images are not tinted by Kd");
+    assert_eq!(t0.wrap, [Wrap::ClampToEdge; 2]);
+    assert!(t0.v_up);
+    assert_eq!(t0.size, [8, 4]);
+    assert_eq!(t1.material, "stone");
+    assert_eq!(t1.image, ImageSource::File(d.path().join("stone.jpg")));
+    assert_eq!(
+        (t1.tint, t1.wrap, t1.size),
+        ([255; 4], [Wrap::Repeat; 2], [16, 2])
+    );
+    // One image, two materials: two textures with equal images.
+    assert_eq!(t2.material, "wood scaled");
+    assert_eq!(t2.image, t0.image);
+    assert_eq!(t2.wrap, [Wrap::Repeat; 2]);
+
+    assert_eq!(c.triangles.len(), 6);
+    let tri = |t: usize| c.triangles[t].map(|i| c.vertices[i as usize]);
+    let textures = |t: usize| tri(t).map(|v| v.texture);
+    let uvs = |t: usize| tri(t).map(|v| v.uv);
+    assert_eq!(textures(0), [0; 3]);
+    assert_eq!(uvs(0), [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]]);
+    assert_eq!(
+        tri(0)[0].color,
+        [128, 128, 128, 255],
+        "the fallback colour is Kd"
+    );
+    assert_eq!(textures(1), [1; 3]);
+    assert_eq!(uvs(1), [[0.0, 0.0], [1.0, 1.0], [0.25, 0.75]]);
+    assert_eq!(textures(2), [NO_TEXTURE; 3]);
+    assert_eq!(tri(2)[0].color, [255, 0, 0, 255]);
+    assert_eq!(textures(3), [2; 3]);
+    // u' = 2 u + 0.5, v' = 4 v + 0.25.
+    assert_eq!(uvs(3), [[0.5, 0.25], [2.5, 0.25], [1.0, 3.25]]);
+    // The wood face without vt: untextured, in Kd.
+    assert_eq!(textures(4), [NO_TEXTURE; 3]);
+    assert_eq!(tri(4)[0].color, [128, 128, 128, 255]);
+    // The last wood face reuses the first one's vertices.
+    assert_eq!(c.triangles[5], c.triangles[0]);
+    // Vertices of different textures are never one vertex.
+    for (a, ta) in c.triangles.iter().enumerate() {
+        for (b, tb) in c.triangles.iter().enumerate() {
+            if textures(a)[0] != textures(b)[0] {
+                assert!(
+                    ta.iter().all(|i| !tb.contains(i)),
+                    "{a} and {b} share a vertex"
+                );
+            }
+        }
+    }
+    assert!(c
+        .vertices
+        .iter()
+        .all(|v| v.texture == NO_TEXTURE || (v.texture as usize) < r.textures.len()));
+}
+
+/// A missing image and an unreadable one (a corrupt PNG, a text file named .jpg):
+/// warnings naming them, their vertices untextured in `Kd`, the readable texture of a
+/// third material still used.
+#[test]
+fn missing_and_unreadable_map_kd_images_fall_back_to_kd() {
+    let mtl = "newmtl gone\nKd 0 1 0\nmap_Kd gone.png\n\
+               newmtl corrupt\nKd 0 0 1\nmap_Kd corrupt.png\n\
+               newmtl text\nmap_Kd notes.jpg\n\
+               newmtl good\nmap_Kd good.png\n";
+    let obj = "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\n\
+               usemtl gone\nf 1/1 2/2 3/3\nusemtl corrupt\nf 1/1 2/2 3/3\n\
+               usemtl text\nf 1/1 2/2 3/3\nusemtl good\nf 1/1 2/2 3/3\n";
+    let mut corrupt = png(4, 4);
+    corrupt.truncate(30);
+    corrupt[20] ^= 0xff;
+    let (r, c, d) = read_with_files(
+        "f.obj",
+        obj,
+        &[
+            ("m.mtl", mtl.as_bytes()),
+            ("corrupt.png", &corrupt),
+            ("notes.jpg", b"just some text, no image"),
+            ("good.png", &png(3, 5)),
+        ],
+    );
+    let shown = |n: &str| d.path().join(n).display().to_string();
+    assert_eq!(r.missing_files, [shown("gone.png")]);
+    assert_eq!(
+        r.unreadable_images,
+        [shown("corrupt.png"), shown("notes.jpg")]
+    );
+    assert_eq!(r.textures.len(), 1);
+    assert_eq!(r.textures[0].material, "good");
+    assert_eq!(r.textures[0].size, [3, 5]);
+    assert!(c.headers[0].attributes.textures);
+    let tri = |t: usize| c.triangles[t].map(|i| c.vertices[i as usize]);
+    assert_eq!(
+        tri(0).map(|v| (v.texture, v.color)),
+        [(NO_TEXTURE, [0, 255, 0, 255]); 3]
+    );
+    assert_eq!(
+        tri(1).map(|v| (v.texture, v.color)),
+        [(NO_TEXTURE, [0, 0, 255, 255]); 3]
+    );
+    assert_eq!(tri(2).map(|v| v.texture), [NO_TEXTURE; 3]);
+    assert_eq!(tri(3).map(|v| v.texture), [0; 3]);
+    // The UVs of the untextured faces are kept.
+    assert_eq!(tri(0)[1].uv, [1.0, 0.0]);
+
+    // All images missing: no vertex textured, and the header says so.
+    let (r, c, _d) = read_with_files("g.obj", obj, &[("m.mtl", mtl.as_bytes())]);
+    assert!(!c.headers[0].attributes.textures);
+    assert!(r.textures.is_empty());
+    assert_eq!(r.missing_files.len(), 4);
+    assert!(c.vertices.iter().all(|v| v.texture == NO_TEXTURE));
+}
+
+/// The header's `textures` is exact: faces of a textured material that all lack `vt`
+/// (and a face continued over two lines that has them) are told apart before the first
+/// vertex; an image format other than PNG or JPEG is named as not used.
+#[test]
+fn the_header_knows_whether_any_vertex_is_textured() {
+    let mtl = "newmtl t\nmap_Kd t.png\nnewmtl b\nmap_Kd b.bmp\n";
+    let files: &[(&str, &[u8])] = &[("m.mtl", mtl.as_bytes()), ("t.png", &png(2, 2))];
+    let head = "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvn 0 0 1\n";
+    // vt used only outside the textured material; its faces have none.
+    let obj = format!("{head}f 1/1 2/1 3/1\nusemtl t\nf 1//1 2//1 3//1\n");
+    let (r, c, _d) = read_with_files("a.obj", &obj, files);
+    assert!(!c.headers[0].attributes.textures && c.headers[0].attributes.uvs);
+    assert!(r.textures.is_empty());
+    assert_eq!(r.untextured_faces, 1);
+    // A face continued with `\`.
+    let obj = format!("{head}usemtl t\nf 1/1 \\\n 2/1 3/1\n");
+    let (r, c, _d) = read_with_files("b.obj", &obj, files);
+    assert!(c.headers[0].attributes.textures);
+    assert_eq!(c.vertices.iter().filter(|v| v.texture == 0).count(), 3);
+    assert_eq!(r.untextured_faces, 0);
+    // A BMP: not used, named.
+    let mut bmp = Vec::new();
+    image::RgbImage::new(2, 2)
+        .write_to(&mut std::io::Cursor::new(&mut bmp), image::ImageFormat::Bmp)
+        .unwrap_or_else(|_| bmp = b"BM\0\0\0\0".to_vec());
+    let obj = format!("{head}usemtl b\nf 1/1 2/1 3/1\n");
+    let (r, c, _d) = read_with_files("c.obj", &obj, &[files[0], ("b.bmp", &bmp)]);
+    assert!(!c.headers[0].attributes.textures);
+    assert_eq!(r.textures_not_used.len(), 1, "{:?}", r.textures_not_used);
+    assert!(
+        r.textures_not_used[0].starts_with("b (image 'b.bmp'): "),
+        "{:?}",
+        r.textures_not_used
+    );
+    assert!(r.unreadable_images.is_empty());
+}
+
+/// The real textured scan (YCB scissors, from Blender): one material, one 4096 x 4096
+/// PNG; every vertex samples it.
+#[test]
+fn ycb_scissors_vertices_sample_their_texture() {
+    let Some(dir) = shared_data("ycb-scissors") else {
+        return;
+    };
+    let path = dir.join("textured_simple_reoriented.obj");
+    let mut c = Collect::default();
+    let r = read_mesh(&path, &mut c).unwrap();
+    assert!(c.headers[0].attributes.textures);
+    assert_eq!(r.textures.len(), 1, "{:?}", r.textures);
+    let t = &r.textures[0];
+    assert_eq!(t.material, "material_0.006");
+    assert_eq!(t.image, ImageSource::File(dir.join("texture_map.png")));
+    assert_eq!(t.image_name, "texture_map.png");
+    assert_eq!(t.size, [4096, 4096]);
+    assert!(t.v_up);
+    assert_eq!(t.wrap, [Wrap::Repeat; 2]);
+    // Kd 0.639216.
+    assert_eq!(
+        t.tint, [255; 4],
+        "the image as it is (Kd is the fallback colour)"
+    );
+    assert!(r.missing_files.is_empty() && r.unreadable_images.is_empty());
+    assert_eq!(r.triangles, 15728);
+    assert!(c.vertices.iter().all(|v| v.texture == 0));
+    assert!(c.vertices.iter().all(|v| v.color == [163, 163, 163, 255]));
+}
+
+/// A gzip-compressed OBJ is read in three passes through the inflater (the texture pass
+/// too), its images found beside it.
+#[test]
+fn a_gzipped_textured_obj_finds_its_images() {
+    use std::io::Write;
+    let obj = "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\n\
+               usemtl t\nf 1/1 2/2 3/3\n";
+    let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+    gz.write_all(obj.as_bytes()).unwrap();
+    let gz = gz.finish().unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("m.mtl"), "newmtl t\nmap_Kd t.jpg\n").unwrap();
+    std::fs::write(dir.path().join("t.jpg"), jpeg(3, 3)).unwrap();
+    let path = dir.path().join("scan.obj.gz");
+    std::fs::write(&path, gz).unwrap();
+    let mut c = Collect::default();
+    let r = read_mesh(&path, &mut c).unwrap();
+    assert!(c.headers[0].attributes.textures);
+    assert_eq!(r.textures.len(), 1);
+    assert_eq!(r.textures[0].size, [3, 3]);
+    assert!(c.vertices.iter().all(|v| v.texture == 0));
 }

@@ -87,7 +87,8 @@ end_header
         Attributes {
             normals: true,
             colors: true,
-            uvs: true
+            uvs: true,
+            textures: false,
         }
     );
     assert_eq!(c.vertices[0].color, [255, 128, 0, 255]);
@@ -177,7 +178,8 @@ fn binary_le_normals_and_rgba() {
         Attributes {
             normals: true,
             colors: true,
-            uvs: false
+            uvs: false,
+            textures: false,
         }
     );
     assert_eq!(c.vertices[1].color, [10, 20, 30, 40]);
@@ -540,6 +542,8 @@ fn masked(v: &Vertex, a: Attributes) -> Vertex {
         normal: if a.normals { v.normal } else { d.normal },
         color: if a.colors { v.color } else { d.color },
         uv: if a.uvs { v.uv } else { d.uv },
+        // Writers ignore textures.
+        texture: d.texture,
     }
 }
 
@@ -553,6 +557,7 @@ fn writer_round_trip_all_attribute_combinations() {
                 normal: [0.1 * f, 0.2, -0.3],
                 color: [i as u8, 200, 7, 100 + i as u8],
                 uv: [0.25 * f, 1.0 - 0.25 * f],
+                texture: i,
             }
         })
         .collect();
@@ -562,6 +567,7 @@ fn writer_round_trip_all_attribute_combinations() {
             normals: bits & 1 != 0,
             colors: bits & 2 != 0,
             uvs: bits & 4 != 0,
+            textures: false,
         };
         let (c, r) = write_and_read(a, &vertices, &triangles);
         assert_eq!(c.headers[0].attributes, a);
@@ -586,12 +592,14 @@ fn arb_mesh() -> impl Strategy<Value = (Attributes, Vec<Vertex>, Vec<[u32; 3]>)>
             normal,
             color,
             uv,
+            texture: tessera_mesh::NO_TEXTURE,
         });
     let attrs = (any::<bool>(), any::<bool>(), any::<bool>()).prop_map(|(normals, colors, uvs)| {
         Attributes {
             normals,
             colors,
             uvs,
+            textures: false,
         }
     });
     (attrs, prop::collection::vec(vertex, 3..40)).prop_flat_map(|(a, vs)| {

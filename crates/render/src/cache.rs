@@ -13,6 +13,13 @@
 //! `tessera_stream::Scheduler`, through [`GpuStore`], the cache's `ResidentStore`
 //! face. The buffers start small and grow on demand up to the budget.
 //!
+//! Textured models (`ATTR_TEXTURE`): each resident patch also holds its own texture
+//! (with mips, made at upload: `crate::texture`) and the bind group that draws it, in
+//! its [`Slot`]; the texture's bytes count in the slot's bytes, the resident bytes and
+//! the budget, which the textures share with the buffers' growth (a buffer grows only
+//! into budget no texture holds, a texture is uploaded only into budget neither buffer
+//! has grown into). Models without textures pay nothing for this.
+//!
 //! Several models share one cache: slots are keyed by (model, node), so the buffers,
 //! the allocators and their free space are shared, and each model's scheduler sees its
 //! own [`GpuStore`] (its uploads, evictions and bytes). The single-model methods
@@ -22,8 +29,10 @@ use std::ops::Range;
 
 use range_alloc::RangeAllocator;
 use rustc_hash::FxHashMap;
-use tessera_format::PatchData;
+use tessera_format::{PatchData, TextureChart};
 use tessera_stream::{ResidentStore, StoreError};
+
+use crate::texture::{texture_gpu_bytes, SlotTexture, TextureKit};
 
 /// One vertex as the shader reads it, 40 bytes: the vertex and its morph target (the
 /// position and attributes it takes in its parent's shape, see `tessera_select::morph`).
@@ -46,9 +55,11 @@ pub struct GpuVertex {
     /// The target's normal, same coding (the surviving vertex's normal when it is in
     /// the patch, else the vertex's own).
     pub target_normal: [i16; 2],
-    /// RGBA8, white when the model has no colours.
+    /// RGBA8, white when the model has no colours. Textured models: the vertex's
+    /// coordinate in its patch texture, unorm16 x 2 ([`uv_unorm16`]).
     pub color: [u8; 4],
-    /// The target's colour (same rule as the normal).
+    /// The target's colour (same rule as the normal); textured models: its texture
+    /// coordinate ([`gpu_vertices_as`]).
     pub target_color: [u8; 4],
 }
 
@@ -85,6 +96,22 @@ pub fn oct_snorm16(n: [f32; 3]) -> [i16; 2] {
     [q(x), q(y)]
 }
 
+/// A texture coordinate (normalised, clamped to 0..1) as unorm16 x 2, in the bytes of a
+/// [`GpuVertex`] colour slot (textured models: the textured pipeline reads locations 4
+/// and 5 as `Unorm16x2`).
+pub fn uv_unorm16(t: [f32; 2]) -> [u8; 4] {
+    // NaN clamps to NaN, which casts to 0.
+    let q = |v: f32| ((v.clamp(0.0, 1.0) * 65535.0).round() as u16).to_le_bytes();
+    let (a, b) = (q(t[0]), q(t[1]));
+    [a[0], a[1], b[0], b[1]]
+}
+
+/// Whether `p`'s vertices are drawn with its texture: it has charts (a patch of a
+/// textured model; see [`GpuCache::set_textured`] for the model's own switch).
+pub fn patch_is_textured(p: &PatchData) -> bool {
+    !p.chart_ids.is_empty() || p.texture.is_some()
+}
+
 /// Converts a decoded patch to GPU vertices, positions in the local frame
 /// (`grid * quant_step`), morph targets with their attributes: a target is a surviving
 /// vertex of the parent's simplification, whose normal and colour are taken from the
@@ -92,11 +119,31 @@ pub fn oct_snorm16(n: [f32; 3]) -> [i16; 2] {
 /// of its residency group: about 8% of the moving vertices of the Bunny and the Dragon
 /// move onto a survivor of a sibling); one hash lookup per moving vertex, at upload
 /// only. A survivor found nowhere lends nothing: the vertex keeps its own attributes
-/// while it moves.
+/// while it moves. Textured patches ([`patch_is_textured`]) carry texture coordinates
+/// instead of colours ([`gpu_vertices_as`]).
 pub fn gpu_vertices(
     p: &PatchData,
     siblings: &[&PatchData],
     quant_step: f64,
+    out: &mut Vec<GpuVertex>,
+) {
+    gpu_vertices_as(p, siblings, quant_step, patch_is_textured(p), out);
+}
+
+/// [`gpu_vertices`], textured or not as told. Textured: the colour slots hold the
+/// vertex's coordinate in the patch texture, `charts[chart_ids[i]].map(uvs[i])`, and its
+/// target's, as [`uv_unorm16`] (no chart: the source uv as it is). The target's uv comes
+/// from a survivor at the target position (patch first, then `siblings`) whose chart
+/// shows the same source image as the vertex's own chart, the one with the nearest
+/// source uv among them (a seam splits a survivor into several vertices, one per side),
+/// mapped through the vertex's OWN chart (the builder sized each chart to hold its
+/// vertices' targets). No such survivor: the target keeps the vertex's own uv. Its
+/// normal follows the untextured rule (the first vertex at the position).
+pub fn gpu_vertices_as(
+    p: &PatchData,
+    siblings: &[&PatchData],
+    quant_step: f64,
+    textured: bool,
     out: &mut Vec<GpuVertex>,
 ) {
     out.clear();
@@ -108,31 +155,53 @@ pub fn gpu_vertices(
             (q[2] as f64 * quant_step) as f32,
         ]
     };
-    let attributes = |p: &PatchData, i: usize| {
-        let n = match p.normals.get(i) {
-            Some(&n) if p.normals.len() == p.positions.len() => oct_snorm16(n),
-            _ => [0, 0],
-        };
-        (n, p.colors.get(i).copied().unwrap_or([255; 4]))
+    let normal = |p: &PatchData, i: usize| match p.normals.get(i) {
+        Some(&n) if p.normals.len() == p.positions.len() => oct_snorm16(n),
+        _ => [0, 0],
     };
+    let color = |p: &PatchData, i: usize| p.colors.get(i).copied().unwrap_or([255; 4]);
+    // Textured: the source uv and the chart of vertex `i` of `p`.
+    let uv = |p: &PatchData, i: usize| match p.uvs.get(i) {
+        Some(&uv) if p.uvs.len() == p.positions.len() => uv,
+        _ => [0.0, 0.0],
+    };
+    fn chart(p: &PatchData, i: usize) -> Option<&TextureChart> {
+        if p.chart_ids.len() != p.positions.len() {
+            return None;
+        }
+        p.charts.get(usize::from(p.chart_ids[i]))
+    }
     let morphs = p.morph_targets.len() == p.positions.len()
         && p.morph_targets
             .iter()
             .zip(&p.positions)
             .any(|(t, q)| t != q);
-    // Where each position is: this patch first (source 0), then the siblings.
-    let mut at: FxHashMap<[u32; 3], (u32, u32)> = FxHashMap::default();
+    let sources: Vec<&PatchData> = std::iter::once(p).chain(siblings.iter().copied()).collect();
+    // Where each position is: this patch first (source 0), then the siblings. Every
+    // vertex at a position, in that order, as a list (head in `at`, links in
+    // `entries`: (source, vertex, next entry or u32::MAX)), built back to front.
+    let mut at: FxHashMap<[u32; 3], u32> = FxHashMap::default();
+    let mut entries: Vec<(u32, u32, u32)> = Vec::new();
     if morphs {
-        let sources = std::iter::once(p).chain(siblings.iter().copied());
-        for (k, s) in sources.enumerate() {
-            for (i, q) in s.positions.iter().enumerate() {
-                at.entry(*q).or_insert((k as u32, i as u32));
+        for (k, s) in sources.iter().enumerate().rev() {
+            for (i, q) in s.positions.iter().enumerate().rev() {
+                let e = entries.len() as u32;
+                let next = at.insert(*q, e).unwrap_or(u32::MAX);
+                entries.push((k as u32, i as u32, next));
             }
         }
     }
     for (i, q) in p.positions.iter().enumerate() {
         let position = local(q);
-        let (n, c) = attributes(p, i);
+        let n = normal(p, i);
+        let (c, own_chart, own_uv) = if textured {
+            let uv = uv(p, i);
+            let ch = chart(p, i);
+            let t = ch.map_or(uv, |ch| ch.map(uv));
+            (uv_unorm16(t), ch, uv)
+        } else {
+            (color(p, i), None, [0.0; 2])
+        };
         let mut v = GpuVertex {
             position,
             target: position,
@@ -144,9 +213,32 @@ pub fn gpu_vertices(
         if morphs && p.morph_targets[i] != *q {
             let t = &p.morph_targets[i];
             v.target = local(t);
-            if let Some(&(k, j)) = at.get(t) {
-                let s = if k == 0 { p } else { siblings[k as usize - 1] };
-                (v.target_normal, v.target_color) = attributes(s, j as usize);
+            if let Some(&head) = at.get(t) {
+                let (k, j, _) = entries[head as usize];
+                let s = sources[k as usize];
+                v.target_normal = normal(s, j as usize);
+                if !textured {
+                    v.target_color = color(s, j as usize);
+                } else if let Some(own) = own_chart {
+                    // The nearest source uv among the survivors on the same image.
+                    let mut best: Option<(f32, [f32; 2])> = None;
+                    let mut e = head;
+                    while e != u32::MAX {
+                        let (k, j, next) = entries[e as usize];
+                        let s = sources[k as usize];
+                        if chart(s, j as usize).is_some_and(|c| c.image == own.image) {
+                            let u = uv(s, j as usize);
+                            let d = (u[0] - own_uv[0]).powi(2) + (u[1] - own_uv[1]).powi(2);
+                            if best.is_none_or(|(bd, _)| d < bd) {
+                                best = Some((d, u));
+                            }
+                        }
+                        e = next;
+                    }
+                    if let Some((_, u)) = best {
+                        v.target_color = uv_unorm16(own.map(u));
+                    }
+                }
             }
         }
         out.push(v);
@@ -162,20 +254,27 @@ pub struct Slot {
     pub indices: Range<u32>,
     /// The node's tag ([`vertex_tag`]), drawn with it as instance data.
     pub tag: u32,
+    /// Textured patches: the patch texture, drawn through the textured pipeline
+    /// (bind group 1); None for patches of models without textures.
+    pub texture: Option<SlotTexture>,
 }
 
 impl Slot {
-    /// GPU bytes held.
+    /// GPU bytes held: vertices, indices and the texture (mips included).
     pub fn bytes(&self) -> u64 {
         u64::from(self.vertices.end - self.vertices.start) * VERTEX_BYTES
             + u64::from(self.indices.end - self.indices.start) * INDEX_BYTES
+            + self.texture.as_ref().map_or(0, |t| t.bytes)
     }
 }
 
 /// Counters of the cache.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct GpuCacheStats {
+    /// Bytes of the resident patches, their textures included.
     pub resident_bytes: u64,
+    /// The textures' part of `resident_bytes`.
+    pub texture_bytes: u64,
     pub resident_patches: usize,
     pub uploaded_bytes: u64,
     pub uploads: u64,
@@ -194,6 +293,15 @@ pub struct GpuCache {
     /// Per model: the level of each node (for the vertex tags); see
     /// [`GpuCache::set_levels`].
     levels: Vec<Vec<u8>>,
+    /// Per model: whether it is textured ([`GpuCache::set_textured`]).
+    textured: Vec<bool>,
+    /// The texture layout, sampler and grey stand-in, made at the first textured upload.
+    kit: Option<TextureKit>,
+    /// Bytes the vertex and index buffers and the textures may take together: the
+    /// buffers' maxima (the budget, as clamped). Textures and buffer growth share it.
+    total: u64,
+    /// The device's largest texture (larger patch textures start at a smaller mip).
+    max_texture_dim: u32,
     scratch: Vec<GpuVertex>,
 }
 
@@ -215,6 +323,14 @@ fn slot_key(model: u32, node: u32) -> u64 {
 pub const VERTEX_SHARE: f64 = 0.68;
 
 const INITIAL_BUFFER_BYTES: u64 = 8 << 20;
+/// The buffers start at most at this part of their maximum: textures share the budget
+/// with the buffers' capacity (which never shrinks), and a small budget's buffers
+/// starting at their maxima would leave no room for any texture. (Untextured models
+/// draw the same either way; a small budget's buffers just grow on demand.)
+const INITIAL_SHARE: u32 = 8;
+
+/// A patch texture's texels: width, height, RGBA8.
+type TexelsRef<'p> = (u32, u32, &'p [u8]);
 
 /// One growable GPU buffer carved into element ranges (vertices or indices).
 struct Pool {
@@ -228,7 +344,8 @@ struct Pool {
 }
 
 impl Pool {
-    /// A pool of at most `budget_bytes`, starting at [`INITIAL_BUFFER_BYTES`].
+    /// A pool of at most `budget_bytes`, starting at [`INITIAL_BUFFER_BYTES`] or
+    /// [`INITIAL_SHARE`] of the maximum, whichever is less.
     fn new(
         device: &wgpu::Device,
         label: &'static str,
@@ -237,7 +354,9 @@ impl Pool {
         budget_bytes: u64,
     ) -> Pool {
         let max = (budget_bytes / elem_bytes).min(u64::from(u32::MAX)) as u32;
-        let start = ((INITIAL_BUFFER_BYTES.min(budget_bytes) / elem_bytes) as u32).min(max);
+        let start = ((INITIAL_BUFFER_BYTES.min(budget_bytes) / elem_bytes) as u32)
+            .min((max / INITIAL_SHARE).max(1))
+            .min(max);
         Pool {
             buffer: Self::make_buffer(device, label, usage, u64::from(start) * elem_bytes),
             alloc: RangeAllocator::new(0..start),
@@ -266,13 +385,19 @@ impl Pool {
         self.alloc.initial_range().end
     }
 
-    fn can_grow(&self) -> bool {
-        self.capacity() < self.max
+    fn capacity_bytes(&self) -> u64 {
+        u64::from(self.capacity()) * self.elem_bytes
     }
 
-    /// Too few free elements in total for `n`, and room to grow.
-    fn short_of(&self, n: u32) -> bool {
-        self.alloc.total_available() < n && self.can_grow()
+    /// The capacity it may grow to with `room` bytes to spare (at most its maximum).
+    fn limit(&self, room: u64) -> u32 {
+        let extra = (room / self.elem_bytes).min(u64::from(u32::MAX)) as u32;
+        self.capacity().saturating_add(extra).min(self.max)
+    }
+
+    /// Free elements now.
+    fn available(&self) -> u32 {
+        self.alloc.total_available()
     }
 
     /// A range of `n` elements; empty ranges are legal for empty patches and cost nothing.
@@ -290,10 +415,10 @@ impl Pool {
         }
     }
 
-    /// Doubles the capacity (at least to `n`, at most to the maximum), copying the
+    /// Doubles the capacity (at least to `n`, at most to `limit`), copying the
     /// contents with `enc`.
-    fn grow(&mut self, device: &wgpu::Device, enc: &mut wgpu::CommandEncoder, n: u32) {
-        let new_cap = self.capacity().saturating_mul(2).max(n).min(self.max);
+    fn grow(&mut self, device: &wgpu::Device, enc: &mut wgpu::CommandEncoder, n: u32, limit: u32) {
+        let new_cap = self.capacity().saturating_mul(2).max(n).min(limit);
         let nb = Self::make_buffer(
             device,
             self.label,
@@ -321,7 +446,7 @@ impl GpuCache {
         let max = device.limits().max_buffer_size;
         let v_cap = ((budget_bytes as f64 * VERTEX_SHARE) as u64).clamp(256 << 10, max);
         let i_cap = budget_bytes.saturating_sub(v_cap).clamp(256 << 10, max);
-        GpuCache {
+        let mut cache = GpuCache {
             vertices: Pool::new(
                 device,
                 "tessera patch cache: vertices",
@@ -340,8 +465,82 @@ impl GpuCache {
             stats: GpuCacheStats::default(),
             per_model: Vec::new(),
             levels: Vec::new(),
+            textured: Vec::new(),
+            kit: None,
+            total: 0,
+            max_texture_dim: device.limits().max_texture_dimension_2d,
             scratch: Vec::new(),
+        };
+        cache.total = u64::from(cache.vertices.max) * VERTEX_BYTES
+            + u64::from(cache.indices.max) * INDEX_BYTES;
+        cache
+    }
+
+    /// Marks `model` textured (its header has `ATTR_TEXTURE`) or not: its patches are
+    /// uploaded with texture coordinates and drawn with their textures from then on
+    /// (upload before the call keeps what it made). A patch with charts is drawn
+    /// textured whatever the switch says ([`patch_is_textured`]); the switch makes a
+    /// textured model's patch that came without its texture draw textured too, with a
+    /// 1x1 grey texture.
+    pub fn set_textured(&mut self, model: u32, textured: bool) {
+        let m = model as usize;
+        if self.textured.len() <= m {
+            self.textured.resize(m + 1, false);
         }
+        self.textured[m] = textured;
+    }
+
+    /// Whether `patch` of `model` is uploaded (and drawn) textured.
+    fn uploads_textured(&self, model: u32, patch: &PatchData) -> bool {
+        self.textured.get(model as usize).copied().unwrap_or(false) || patch_is_textured(patch)
+    }
+
+    /// The texture bytes `patch` takes once uploaded for `model` (0: none, or the
+    /// shared grey stand-in), and its texels when it has a texture of its own.
+    fn texture_plan<'p>(&self, model: u32, patch: &'p PatchData) -> (u64, Option<TexelsRef<'p>>) {
+        if patch.positions.is_empty() || !self.uploads_textured(model, patch) {
+            return (0, None);
+        }
+        match &patch.texture {
+            Some(t)
+                if t.width > 0
+                    && t.height > 0
+                    && t.rgba.len() as u64 == 4 * u64::from(t.width) * u64::from(t.height) =>
+            {
+                let bytes = texture_gpu_bytes(t.width, t.height, self.max_texture_dim);
+                (bytes, Some((t.width, t.height, &t.rgba[..])))
+            }
+            _ => (0, None),
+        }
+    }
+
+    /// GPU bytes `patch` takes once uploaded for `model`: vertices, indices and its
+    /// texture with the mip chain ([`Slot::bytes`] of the slot it gets).
+    pub fn patch_bytes(&self, model: u32, patch: &PatchData) -> u64 {
+        patch.positions.len() as u64 * VERTEX_BYTES
+            + patch.indices.len() as u64 * INDEX_BYTES
+            + self.texture_plan(model, patch).0
+    }
+
+    /// GPU bytes a patch texture of `size` texels takes on this device (mips included).
+    pub fn texture_bytes_for(&self, size: [u16; 2]) -> u64 {
+        texture_gpu_bytes(u32::from(size[0]), u32::from(size[1]), self.max_texture_dim)
+    }
+
+    /// The bind group layout of the patch textures (group 1 of the textured pipeline),
+    /// once a textured patch has been uploaded.
+    pub fn texture_layout(&self) -> Option<&wgpu::BindGroupLayout> {
+        self.kit.as_ref().map(|k| &k.layout)
+    }
+
+    /// Bytes left in the budget for growing a buffer or a texture: the budget less the
+    /// buffers' capacities and the resident textures.
+    fn room(&self) -> u64 {
+        self.total.saturating_sub(
+            self.vertices.capacity_bytes()
+                + self.indices.capacity_bytes()
+                + self.stats.texture_bytes,
+        )
     }
 
     /// The vertex buffer (bind it whole; slots address it with `base_vertex`).
@@ -355,12 +554,30 @@ impl GpuCache {
     }
 
     /// Grows whichever buffer lacks room for `nv` vertices / `ni` indices (copying the
-    /// contents on the GPU); false when both are at their maximum.
-    fn grow(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, nv: u32, ni: u32) -> bool {
-        let (mut want_v, mut want_i) = (self.vertices.short_of(nv), self.indices.short_of(ni));
+    /// contents on the GPU), keeping `reserve` bytes of the budget free (for the
+    /// patch's texture); false when neither can grow.
+    fn grow(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        (nv, ni): (u32, u32),
+        reserve: u64,
+    ) -> bool {
+        // Without textures the budget holds both buffers at their maxima, so the limits
+        // are the maxima.
+        let room = self.room().saturating_sub(reserve);
+        let (v_lim, i_lim) = (self.vertices.limit(room), self.indices.limit(room));
+        let (can_v, can_i) = (
+            self.vertices.capacity() < v_lim,
+            self.indices.capacity() < i_lim,
+        );
+        let (mut want_v, mut want_i) = (
+            self.vertices.available() < nv && can_v,
+            self.indices.available() < ni && can_i,
+        );
         if !want_v && !want_i {
             // Fragmentation: room in total but no contiguous range; grow whichever can.
-            (want_v, want_i) = (self.vertices.can_grow(), self.indices.can_grow());
+            (want_v, want_i) = (can_v, can_i);
         }
         if !want_v && !want_i {
             return false;
@@ -369,10 +586,14 @@ impl GpuCache {
             label: Some("tessera patch cache growth"),
         });
         if want_v {
-            self.vertices.grow(device, &mut enc, nv);
+            self.vertices.grow(device, &mut enc, nv, v_lim);
         }
         if want_i {
-            self.indices.grow(device, &mut enc, ni);
+            // What the vertex buffer's growth left.
+            let i_lim = self.indices.limit(self.room().saturating_sub(reserve));
+            if self.indices.capacity() < i_lim {
+                self.indices.grow(device, &mut enc, ni, i_lim);
+            }
         }
         // Submitted now: writes staged before it land first, later ones after the copy.
         queue.submit([enc.finish()]);
@@ -432,14 +653,30 @@ impl GpuCache {
     /// Whether `nv` vertices and `ni` indices more would fit, counting growth up to the
     /// budget (a contiguous range may still be missing: fragmentation).
     pub fn has_room(&self, nv: u64, ni: u64) -> bool {
-        let free =
-            |p: &Pool| u64::from(p.alloc.total_available()) + u64::from(p.max - p.capacity());
-        free(&self.vertices) >= nv && free(&self.indices) >= ni
+        self.has_room_for(nv, ni, 0)
+    }
+
+    /// [`GpuCache::has_room`] with `texture_bytes` of textures too (they share the
+    /// budget with the buffers' growth).
+    pub fn has_room_for(&self, nv: u64, ni: u64, texture_bytes: u64) -> bool {
+        // Elements each buffer must grow by.
+        let grow = |p: &Pool, n: u64| {
+            let short = n.saturating_sub(u64::from(p.available()));
+            (short <= u64::from(p.max - p.capacity())).then_some(short * p.elem_bytes)
+        };
+        match (grow(&self.vertices, nv), grow(&self.indices, ni)) {
+            (Some(v), Some(i)) => v + i + texture_bytes <= self.room(),
+            _ => false,
+        }
     }
 
     /// Bytes the models' patches can take together, at most: the budget, or less when
     /// the resident patches' mix of vertex and index bytes would fill one of the two
     /// buffers first (each is capped at its share of the budget: [`VERTEX_SHARE`]).
+    ///
+    /// With textures resident, the mix is of three (vertex, index and texture bytes),
+    /// and what the buffers have grown to counts whether used or not (they never
+    /// shrink): the most bytes in that mix whose buffers and textures fit the budget.
     pub fn usable_bytes(&self) -> u64 {
         let v = u64::from(self.vertices.capacity() - self.vertices.alloc.total_available())
             * VERTEX_BYTES;
@@ -449,6 +686,31 @@ impl GpuCache {
             u64::from(self.vertices.max) * VERTEX_BYTES,
             u64::from(self.indices.max) * INDEX_BYTES,
         );
+        let t = self.stats.texture_bytes;
+        if t > 0 {
+            let total = (v + i + t) as f64;
+            let (fv, fi, ft) = (v as f64 / total, i as f64 / total, t as f64 / total);
+            let (cv, ci) = (
+                self.vertices.capacity_bytes() as f64,
+                self.indices.capacity_bytes() as f64,
+            );
+            let fits = |x: f64| {
+                fv * x <= max_v as f64
+                    && fi * x <= max_i as f64
+                    && (fv * x).max(cv) + (fi * x).max(ci) + ft * x <= self.total as f64
+            };
+            // The fit shrinks as the bytes grow: bisect.
+            let (mut lo, mut hi) = (0u64, self.total);
+            while lo < hi {
+                let mid = lo + (hi - lo).div_ceil(2);
+                if fits(mid as f64) {
+                    lo = mid;
+                } else {
+                    hi = mid - 1;
+                }
+            }
+            return lo;
+        }
         if v + i == 0 {
             return max_v + max_i;
         }
@@ -466,9 +728,10 @@ impl GpuCache {
         (by_v.min(by_i) as u64).min(max_v + max_i)
     }
 
-    /// Bytes the buffers can grow to (the cache's budget, as clamped).
+    /// Bytes the buffers can grow to (the cache's budget, as clamped); the textures
+    /// share it with them.
     pub fn max_bytes(&self) -> u64 {
-        u64::from(self.vertices.max) * VERTEX_BYTES + u64::from(self.indices.max) * INDEX_BYTES
+        self.total
     }
 
     fn model_entry(&mut self, model: u32) -> &mut GpuCacheStats {
@@ -523,19 +786,41 @@ impl GpuCache {
         }
         let nv = u32::try_from(patch.positions.len()).map_err(|_| StoreError::TooBig)?;
         let ni = u32::try_from(patch.indices.len()).map_err(|_| StoreError::TooBig)?;
-        if nv > self.vertices.max || ni > self.indices.max {
+        let textured = self.uploads_textured(model, patch);
+        let (texture_bytes, texels) = self.texture_plan(model, patch);
+        if nv > self.vertices.max
+            || ni > self.indices.max
+            || u64::from(nv) * VERTEX_BYTES + u64::from(ni) * INDEX_BYTES + texture_bytes
+                > self.total
+        {
             return Err(StoreError::TooBig);
         }
         let (vertices, indices) = loop {
+            // The buffers never shrink: only evictions make room for a texture.
+            if texture_bytes > self.room() {
+                return Err(StoreError::Full);
+            }
             match self.try_alloc(nv, ni) {
                 Some(r) => break r,
                 None => {
-                    if !self.grow(device, queue, nv, ni) {
+                    if !self.grow(device, queue, (nv, ni), texture_bytes) {
                         return Err(StoreError::Full);
                     }
                 }
             }
         };
+        let texture = if textured {
+            let kit = self
+                .kit
+                .get_or_insert_with(|| TextureKit::new(device, queue));
+            Some(match texels {
+                Some((w, h, rgba)) => kit.upload(device, queue, w, h, rgba, self.max_texture_dim),
+                None => kit.grey(),
+            })
+        } else {
+            None
+        };
+        debug_assert_eq!(texture.as_ref().map_or(0, |t| t.bytes), texture_bytes);
         let mut verts = std::mem::take(&mut self.scratch);
         let level = self
             .levels
@@ -543,7 +828,7 @@ impl GpuCache {
             .and_then(|l| l.get(node as usize))
             .copied()
             .unwrap_or(0);
-        gpu_vertices(patch, siblings, quant_step, &mut verts);
+        gpu_vertices_as(patch, siblings, quant_step, textured, &mut verts);
         self.vertices
             .write(queue, vertices.start, bytemuck::cast_slice(&verts));
         self.scratch = verts;
@@ -553,13 +838,16 @@ impl GpuCache {
             vertices,
             indices,
             tag: vertex_tag(model, node, level),
+            texture,
         };
         let bytes = slot.bytes();
         self.stats.resident_bytes += bytes;
+        self.stats.texture_bytes += texture_bytes;
         self.stats.uploaded_bytes += bytes;
         self.stats.uploads += 1;
         let m = self.model_entry(model);
         m.resident_bytes += bytes;
+        m.texture_bytes += texture_bytes;
         m.uploaded_bytes += bytes;
         m.uploads += 1;
         m.resident_patches += 1;
@@ -587,12 +875,17 @@ impl GpuCache {
     pub fn evict_of(&mut self, model: u32, node: u32) {
         if let Some(slot) = self.slots.remove(&slot_key(model, node)) {
             let bytes = slot.bytes();
+            let texture_bytes = slot.texture.as_ref().map_or(0, |t| t.bytes);
+            // The texture (and its bind group) go with the slot; wgpu frees them once
+            // submitted work that draws them is done.
             self.vertices.free(slot.vertices);
             self.indices.free(slot.indices);
             self.stats.resident_bytes -= bytes;
+            self.stats.texture_bytes -= texture_bytes;
             self.stats.evictions += 1;
             let m = self.model_entry(model);
             m.resident_bytes -= bytes;
+            m.texture_bytes -= texture_bytes;
             m.evictions += 1;
             m.resident_patches -= 1;
         }
@@ -612,15 +905,22 @@ pub struct GpuStore<'a> {
 
 impl ResidentStore for GpuStore<'_> {
     fn bytes_for(&self, patch: &PatchData) -> u64 {
-        patch_gpu_bytes(patch)
+        self.cache.patch_bytes(self.model, patch)
     }
     fn estimate_bytes(&self, vertices: u32, triangles: u32) -> u64 {
         u64::from(vertices) * VERTEX_BYTES + u64::from(triangles) * 3 * INDEX_BYTES
     }
+    fn estimate_texture_bytes(&self, size: [u16; 2]) -> u64 {
+        self.cache.texture_bytes_for(size)
+    }
     fn has_room(&self, patches: &[&PatchData]) -> bool {
         let nv = patches.iter().map(|p| p.positions.len() as u64).sum();
         let ni = patches.iter().map(|p| p.indices.len() as u64).sum();
-        self.cache.has_room(nv, ni)
+        let nt = patches
+            .iter()
+            .map(|p| self.cache.texture_plan(self.model, p).0)
+            .sum();
+        self.cache.has_room_for(nv, ni, nt)
     }
     fn upload(&mut self, node: u32, patch: &PatchData) -> Result<u64, StoreError> {
         self.upload_in_group(node, patch, &[])
@@ -651,11 +951,6 @@ impl ResidentStore for GpuStore<'_> {
         // staging copies.
         self.queue.submit([]);
     }
-}
-
-/// GPU bytes `p` takes once uploaded.
-pub fn patch_gpu_bytes(p: &PatchData) -> u64 {
-    p.positions.len() as u64 * VERTEX_BYTES + p.indices.len() as u64 * INDEX_BYTES
 }
 
 #[cfg(test)]
@@ -727,5 +1022,111 @@ mod tests {
         gpu_vertices(&a, &[], 0.5, &mut out);
         assert_eq!(out[2].target_normal, out[2].normal);
         assert_eq!(out[2].target_color, [30, 0, 0, 255]);
+    }
+
+    fn unorm16(c: [u8; 4]) -> [f32; 2] {
+        let u = u16::from_le_bytes([c[0], c[1]]);
+        let v = u16::from_le_bytes([c[2], c[3]]);
+        [f32::from(u) / 65535.0, f32::from(v) / 65535.0]
+    }
+
+    fn close(a: [f32; 2], b: [f32; 2]) -> bool {
+        (a[0] - b[0]).abs() < 1e-4 && (a[1] - b[1]).abs() < 1e-4
+    }
+
+    /// Textured patches: the colour slots carry the chart-mapped uv (clamped), and a
+    /// moving vertex's target uv is the survivor's source uv on the same image, the
+    /// nearest one, mapped through the vertex's own chart; no such survivor, its own.
+    #[test]
+    fn targets_take_the_survivors_uv_on_the_same_image() {
+        use tessera_format::TextureChart;
+        let chart = |image, scale: f32, offset: [f32; 2]| TextureChart {
+            image,
+            scale: [scale, scale],
+            offset,
+        };
+        let a = PatchData {
+            // 0: moves onto [8, 0, 0], where 1 (image 2), 2 and 3 (image 0) lie;
+            // 4: moves onto [16, 0, 0] (a survivor of the sibling);
+            // 5: moves onto [24, 0, 0], where only a vertex on another image lies;
+            // 6: stays (target itself); 7: out of its chart's range (clamped).
+            positions: vec![
+                [0, 0, 0],
+                [8, 0, 0],
+                [8, 0, 0],
+                [8, 0, 0],
+                [12, 0, 0],
+                [20, 0, 0],
+                [24, 0, 0],
+                [28, 0, 0],
+            ],
+            uvs: vec![
+                [0.10, 0.10],
+                [0.20, 0.20],
+                [0.90, 0.90],
+                [0.30, 0.25],
+                [0.50, 0.50],
+                [0.60, 0.60],
+                [0.70, 0.70],
+                [5.00, -3.0],
+            ],
+            morph_targets: vec![
+                [8, 0, 0],
+                [8, 0, 0],
+                [8, 0, 0],
+                [8, 0, 0],
+                [16, 0, 0],
+                [24, 0, 0],
+                [24, 0, 0],
+                [28, 0, 0],
+            ],
+            charts: vec![chart(0, 0.5, [0.25, 0.0]), chart(2, 1.0, [0.0, 0.0])],
+            chart_ids: vec![0, 1, 0, 0, 0, 0, 1, 0],
+            indices: vec![0, 1, 2],
+            ..Default::default()
+        };
+        let b = PatchData {
+            positions: vec![[16, 0, 0], [16, 0, 0]],
+            uvs: vec![[0.40, 0.40], [0.55, 0.50]],
+            morph_targets: vec![[16, 0, 0]; 2],
+            // The sibling's own charts: image 0 is chart 1 there.
+            charts: vec![chart(3, 1.0, [0.0, 0.0]), chart(0, 0.25, [0.5, 0.5])],
+            chart_ids: vec![0, 1],
+            ..Default::default()
+        };
+        assert!(patch_is_textured(&a));
+        let mut out = Vec::new();
+        gpu_vertices(&a, &[&b], 0.5, &mut out);
+        let own = |i: usize| unorm16(out[i].color);
+        let target = |i: usize| unorm16(out[i].target_color);
+        let map0 = |uv: [f32; 2]| [uv[0] * 0.5 + 0.25, uv[1] * 0.5];
+        assert!(close(own(0), map0([0.10, 0.10])), "{:?}", own(0));
+        assert!(close(own(1), [0.20, 0.20]));
+        // Vertex 0 (image 0): 1 is on image 2; of 2 and 3 (image 0), 3 is nearer.
+        assert!(close(target(0), map0([0.30, 0.25])), "{:?}", target(0));
+        // Vertex 1 (image 2): only itself is on image 2 at [8, 0, 0].
+        assert!(close(target(1), own(1)));
+        // Vertex 4: the sibling's vertex 1 is on image 0 (through its own chart 1); its
+        // source uv mapped through vertex 4's chart.
+        assert!(close(target(4), map0([0.55, 0.50])), "{:?}", target(4));
+        // Vertex 5 (image 0): the only vertex at [24, 0, 0] is on image 2: own uv.
+        assert!(close(target(5), own(5)), "{:?} vs {:?}", target(5), own(5));
+        // Vertex 6 stays; vertex 7's uv is clamped into the texture.
+        assert_eq!(out[6].target_color, out[6].color);
+        assert!(close(own(7), [1.0, 0.0]), "{:?}", own(7));
+        // Without the sibling, vertex 4 keeps its own uv.
+        gpu_vertices(&a, &[], 0.5, &mut out);
+        assert_eq!(out[4].target_color, out[4].color);
+        // Untextured, the same patch carries colours (white without any).
+        let plain = PatchData {
+            charts: vec![],
+            chart_ids: vec![],
+            ..a.clone()
+        };
+        assert!(!patch_is_textured(&plain));
+        gpu_vertices(&plain, &[], 0.5, &mut out);
+        assert!(out
+            .iter()
+            .all(|v| v.color == [255; 4] && v.target_color == [255; 4]));
     }
 }

@@ -11,6 +11,11 @@
 //! by each view's demand (`tessera_stream::BudgetSplit`), and draws every model in its
 //! own local frame into one pass and one depth buffer.
 //!
+//! Textured models (`ATTR_TEXTURE`, a texture per patch): the cache uploads each
+//! patch's texture with its mips beside its vertices (texture coordinates in the
+//! vertex's colour slots) and counts it in the patch's bytes; the renderer draws those
+//! patches through a second pipeline that samples it, lit and coloured as the rest.
+//!
 //! Feature `native` (default): the [`Viewer`] (over `tessera-page`'s loader threads)
 //! and the blocking device setup. Without it the crate builds for wasm32: the
 //! browser client (`tessera-web`) draws with the same [`Renderer`], shader and
@@ -19,10 +24,14 @@
 mod cache;
 mod gpu;
 mod renderer;
+mod texture;
 #[cfg(feature = "native")]
 mod viewer;
 
-pub use cache::{GpuCache, GpuCacheStats, GpuStore, GpuVertex, Slot};
+pub use cache::{
+    gpu_vertices, gpu_vertices_as, patch_is_textured, uv_unorm16, GpuCache, GpuCacheStats,
+    GpuStore, GpuVertex, Slot,
+};
 pub use gpu::Gpu;
 pub use renderer::{
     clip_planes_along, ColorMode, DrawInstance, FrameParams, Light, Renderer, Shading,
@@ -30,6 +39,10 @@ pub use renderer::{
 };
 pub use tessera_image::{diff_stats, enclosed_background_pixels, psnr, Image, ImageError};
 pub use tessera_stream::{FrameStats, Mode, MorphOptions};
+pub use texture::{
+    downsample, mip_level_count, texture_bind_group_layout, texture_gpu_bytes, SlotTexture,
+    PATCH_TEXTURE_FORMAT,
+};
 #[cfg(feature = "native")]
 pub use viewer::{Viewer, ViewerOptions};
 

@@ -7,6 +7,11 @@
 // a hemispheric ambient term, on the per-vertex colour (or a neutral clay colour when
 // the model has none). Kept simple on purpose: it must look the same on lavapipe and a
 // real GPU, and be cheap.
+//
+// Textured models (a texture per patch) draw through `vs_textured` / `fs_textured`, a
+// second pipeline: the colour slots of the vertex hold the texture coordinate and its
+// morph target (unorm16 x 2 each), the fragment samples the patch texture (group 1), and
+// the colour modes and the lighting are the same functions as the untextured path's.
 
 struct Frame {
     view_proj: mat4x4<f32>,
@@ -62,20 +67,24 @@ fn vs_main(v: VertexIn) -> VertexOut {
     out.clip = frame.view_proj * vec4<f32>(p, 1.0);
     let n0 = oct_decode(v.normal);
     out.normal = n0 + (oct_decode(v.target_normal) - n0) * r;
-    let tag = v.tag & 0xFFFFu;
     let c = v.color + (v.target_color - v.color) * r;
-    // No branches: with a branch on the uniform around per-vertex work, lavapipe
-    // (Mesa 22.3) keeps ~260 KB a frame (RSS grew 116 -> 392 MB over 1,200 frames of
-    // a fixed camera); computing all three colours and selecting leaks nothing.
     let natural = select(frame.clay.rgb, c.rgb, frame.sky_up_has_color.w > 0.5);
+    out.color = mode_color(natural, v.tag);
+    return out;
+}
+
+// The colour of the frame's colour mode: `natural` (mode 0), by node or by level.
+// No branches: with a branch on the uniform around per-vertex work, lavapipe
+// (Mesa 22.3) keeps ~260 KB a frame (RSS grew 116 -> 392 MB over 1,200 frames of
+// a fixed camera); computing all three colours and selecting leaks nothing.
+fn mode_color(natural: vec3<f32>, draw_tag: u32) -> vec3<f32> {
+    let tag = draw_tag & 0xFFFFu;
     // By level: hue from blue (coarse) to red (fine) over 12 levels, then again (a view
     // shows a few adjacent levels; they must look different).
     let by_level = hue(0.66 - f32((tag >> 10u) % 12u) / 11.0 * 0.66);
     // By node: a hashed hue per node, pastel so the shading still reads.
     let by_node = mix(hue(f32(tag & 1023u) / 1023.0), vec3<f32>(1.0), 0.25);
-    let color = select(select(natural, by_node, frame.mode.x > 0.5), by_level, frame.mode.x > 1.5);
-    out.color = color;
-    return out;
+    return select(select(natural, by_node, frame.mode.x > 0.5), by_level, frame.mode.x > 1.5);
 }
 
 fn hue(h: f32) -> vec3<f32> {
@@ -85,13 +94,64 @@ fn hue(h: f32) -> vec3<f32> {
 
 @fragment
 fn fs_main(f: VertexOut) -> @location(0) vec4<f32> {
-    let len = length(f.normal);
-    let n = select(vec3<f32>(0.0, 0.0, 0.0), f.normal / len, len > 1e-6);
+    return shade(f.normal, f.color);
+}
+
+// Head light + hemispheric ambient on `color` (or `color` as it is, unlit mode), for the
+// interpolated `normal`.
+fn shade(normal: vec3<f32>, color: vec3<f32>) -> vec4<f32> {
+    let len = length(normal);
+    let n = select(vec3<f32>(0.0, 0.0, 0.0), normal / len, len > 1e-6);
     let diffuse = max(dot(n, frame.light_dir.xyz), 0.0);
     let hemi = 0.5 + 0.5 * dot(n, frame.sky_up_has_color.xyz);
     let ambient = mix(0.12, 0.28, hemi);
-    let lit = select(f.color * (ambient + 0.75 * diffuse), f.color, frame.mode.y > 0.5);
+    let lit = select(color * (ambient + 0.75 * diffuse), color, frame.mode.y > 0.5);
     return vec4<f32>(clamp(lit, vec3<f32>(0.0), vec3<f32>(1.0)), 1.0);
+}
+
+// Textured models: the patch's texture and the sampler (linear, trilinear mips, clamped).
+@group(1) @binding(0) var patch_texture: texture_2d<f32>;
+@group(1) @binding(1) var patch_sampler: sampler;
+
+// The vertex of a textured model: `VertexIn` with texture coordinates (own and target,
+// unorm16 x 2: 0..1, origin top left, v down) in the colour slots.
+struct TexturedIn {
+    @location(0) position: vec3<f32>,
+    @location(1) target_pos: vec3<f32>,
+    @location(2) normal: vec2<f32>,
+    @location(3) target_normal: vec2<f32>,
+    @location(4) uv: vec2<f32>,
+    @location(5) target_uv: vec2<f32>,
+    @location(6) ratio: f32,
+    @location(7) tag: u32,
+}
+
+struct TexturedOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) normal: vec3<f32>,
+    // The colour by node or by level (unused in the natural mode: the texel is).
+    @location(1) color: vec3<f32>,
+    @location(2) uv: vec2<f32>,
+}
+
+@vertex
+fn vs_textured(v: TexturedIn) -> TexturedOut {
+    var out: TexturedOut;
+    let r = v.ratio;
+    let p = v.position + (v.target_pos - v.position) * r;
+    out.clip = frame.view_proj * vec4<f32>(p, 1.0);
+    let n0 = oct_decode(v.normal);
+    out.normal = n0 + (oct_decode(v.target_normal) - n0) * r;
+    out.uv = v.uv + (v.target_uv - v.uv) * r;
+    out.color = mode_color(frame.clay.rgb, v.tag);
+    return out;
+}
+
+@fragment
+fn fs_textured(f: TexturedOut) -> @location(0) vec4<f32> {
+    // Sampled in uniform control flow; the mode picks by selection, as `mode_color`.
+    let texel = textureSample(patch_texture, patch_sampler, f.uv).rgb;
+    return shade(f.normal, select(texel, f.color, frame.mode.x > 0.5));
 }
 
 // Wireframe overlay: dark, half transparent edges.

@@ -181,9 +181,103 @@ impl FrameParams {
     }
 }
 
+/// The patch vertex ([`GpuVertex`]) as the untextured pipeline reads it.
+const VERTEX_ATTRIBUTES: [wgpu::VertexAttribute; 6] = wgpu::vertex_attr_array![
+    0 => Float32x3,
+    1 => Float32x3,
+    2 => Snorm16x2,
+    3 => Snorm16x2,
+    4 => Unorm8x4,
+    5 => Unorm8x4
+];
+/// The same vertex as the textured pipeline reads it: the colour slots hold texture
+/// coordinates ([`crate::cache::uv_unorm16`]).
+const TEXTURED_VERTEX_ATTRIBUTES: [wgpu::VertexAttribute; 6] = wgpu::vertex_attr_array![
+    0 => Float32x3,
+    1 => Float32x3,
+    2 => Snorm16x2,
+    3 => Snorm16x2,
+    4 => Unorm16x2,
+    5 => Unorm16x2
+];
+/// Per draw (one instance): the node's morph ratio and tag.
+const INSTANCE_ATTRIBUTES: [wgpu::VertexAttribute; 2] =
+    wgpu::vertex_attr_array![6 => Float32, 7 => Uint32];
+
+/// One patch pipeline of the shader: entry points, vertex attributes, polygon mode and
+/// depth bias (the fill, wireframe and textured pipelines differ only there).
+struct PipelineSpec<'a> {
+    layout: &'a wgpu::PipelineLayout,
+    attributes: &'a [wgpu::VertexAttribute],
+    vs: &'a str,
+    fs: &'a str,
+    polygon_mode: wgpu::PolygonMode,
+    bias: wgpu::DepthBiasState,
+}
+
+fn patch_pipeline(
+    device: &wgpu::Device,
+    shader: &wgpu::ShaderModule,
+    color_format: wgpu::TextureFormat,
+    spec: &PipelineSpec<'_>,
+) -> wgpu::RenderPipeline {
+    let vertex_layout = wgpu::VertexBufferLayout {
+        array_stride: std::mem::size_of::<GpuVertex>() as u64,
+        step_mode: wgpu::VertexStepMode::Vertex,
+        attributes: spec.attributes,
+    };
+    let instance_layout = wgpu::VertexBufferLayout {
+        array_stride: std::mem::size_of::<DrawInstance>() as u64,
+        step_mode: wgpu::VertexStepMode::Instance,
+        attributes: &INSTANCE_ATTRIBUTES,
+    };
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some("tessera patch pipeline"),
+        layout: Some(spec.layout),
+        vertex: wgpu::VertexState {
+            module: shader,
+            entry_point: Some(spec.vs),
+            compilation_options: Default::default(),
+            buffers: &[Some(vertex_layout), Some(instance_layout)],
+        },
+        primitive: wgpu::PrimitiveState {
+            topology: wgpu::PrimitiveTopology::TriangleList,
+            front_face: wgpu::FrontFace::Ccw,
+            cull_mode: Some(wgpu::Face::Back),
+            polygon_mode: spec.polygon_mode,
+            ..Default::default()
+        },
+        // Reversed Z: nearer is larger (see `clip_planes_along`).
+        depth_stencil: Some(wgpu::DepthStencilState {
+            format: DEPTH_FORMAT,
+            depth_write_enabled: Some(spec.polygon_mode == wgpu::PolygonMode::Fill),
+            depth_compare: Some(wgpu::CompareFunction::GreaterEqual),
+            stencil: Default::default(),
+            bias: spec.bias,
+        }),
+        multisample: Default::default(),
+        fragment: Some(wgpu::FragmentState {
+            module: shader,
+            entry_point: Some(spec.fs),
+            compilation_options: Default::default(),
+            targets: &[Some(wgpu::ColorTargetState {
+                format: color_format,
+                blend: Some(wgpu::BlendState::ALPHA_BLENDING),
+                write_mask: wgpu::ColorWrites::ALL,
+            })],
+        }),
+        multiview_mask: None,
+        cache: None,
+    })
+}
+
 /// Pipeline, uniforms and offscreen targets.
 pub struct Renderer {
     pipeline: wgpu::RenderPipeline,
+    /// The pipeline of textured models' patches (their slots have a texture), made at
+    /// the first frame that draws one: models without textures never pay for it.
+    textured_pipeline: std::cell::OnceCell<wgpu::RenderPipeline>,
+    shader: wgpu::ShaderModule,
     /// Line pipeline of the wireframe overlay (None: the device cannot draw lines).
     wire_pipeline: Option<wgpu::RenderPipeline>,
     /// Whether the frame set last draws the wireframe overlay.
@@ -244,63 +338,16 @@ impl Renderer {
             bind_group_layouts: &[Some(&bgl)],
             immediate_size: 0,
         });
-        let vertex_layout = wgpu::VertexBufferLayout {
-            array_stride: std::mem::size_of::<GpuVertex>() as u64,
-            step_mode: wgpu::VertexStepMode::Vertex,
-            attributes: &wgpu::vertex_attr_array![
-                0 => Float32x3,
-                1 => Float32x3,
-                2 => Snorm16x2,
-                3 => Snorm16x2,
-                4 => Unorm8x4,
-                5 => Unorm8x4
-            ],
-        };
-        // Per draw (one instance): the node's morph ratio and tag.
-        let instance_layout = wgpu::VertexBufferLayout {
-            array_stride: std::mem::size_of::<DrawInstance>() as u64,
-            step_mode: wgpu::VertexStepMode::Instance,
-            attributes: &wgpu::vertex_attr_array![6 => Float32, 7 => Uint32],
-        };
         let make = |polygon_mode: wgpu::PolygonMode, fs: &str, bias: wgpu::DepthBiasState| {
-            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some("tessera patch pipeline"),
-                layout: Some(&layout),
-                vertex: wgpu::VertexState {
-                    module: &shader,
-                    entry_point: Some("vs_main"),
-                    compilation_options: Default::default(),
-                    buffers: &[Some(vertex_layout.clone()), Some(instance_layout.clone())],
-                },
-                primitive: wgpu::PrimitiveState {
-                    topology: wgpu::PrimitiveTopology::TriangleList,
-                    front_face: wgpu::FrontFace::Ccw,
-                    cull_mode: Some(wgpu::Face::Back),
-                    polygon_mode,
-                    ..Default::default()
-                },
-                // Reversed Z: nearer is larger (see `clip_planes_along`).
-                depth_stencil: Some(wgpu::DepthStencilState {
-                    format: DEPTH_FORMAT,
-                    depth_write_enabled: Some(polygon_mode == wgpu::PolygonMode::Fill),
-                    depth_compare: Some(wgpu::CompareFunction::GreaterEqual),
-                    stencil: Default::default(),
-                    bias,
-                }),
-                multisample: Default::default(),
-                fragment: Some(wgpu::FragmentState {
-                    module: &shader,
-                    entry_point: Some(fs),
-                    compilation_options: Default::default(),
-                    targets: &[Some(wgpu::ColorTargetState {
-                        format: color_format,
-                        blend: Some(wgpu::BlendState::ALPHA_BLENDING),
-                        write_mask: wgpu::ColorWrites::ALL,
-                    })],
-                }),
-                multiview_mask: None,
-                cache: None,
-            })
+            let spec = PipelineSpec {
+                layout: &layout,
+                attributes: &VERTEX_ATTRIBUTES,
+                vs: "vs_main",
+                fs,
+                polygon_mode,
+                bias,
+            };
+            patch_pipeline(device, &shader, color_format, &spec)
         };
         let pipeline = make(wgpu::PolygonMode::Fill, "fs_main", Default::default());
         // Edges over the surface: lines need the device feature (lavapipe and desktop
@@ -325,6 +372,8 @@ impl Renderer {
         let (uniform, bind_group) = Self::make_uniforms(device, &bgl, stride, 1);
         Renderer {
             pipeline,
+            textured_pipeline: std::cell::OnceCell::new(),
+            shader,
             wire_pipeline,
             wireframe: std::cell::Cell::new(false),
             uniform,
@@ -555,6 +604,17 @@ impl Renderer {
             // A valid (never read) binding for a pass that draws nothing.
             instances.push(DrawInstance::default());
         }
+        // Textured patches draw through the textured pipeline, made with the cache's
+        // texture layout the first time one is drawn.
+        let textured = draws
+            .iter()
+            .any(|(_, s)| s.texture.is_some())
+            .then(|| cache.texture_layout())
+            .flatten()
+            .map(|tex_layout| {
+                self.textured_pipeline
+                    .get_or_init(|| self.make_textured_pipeline(device, tex_layout))
+            });
         let instance_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("tessera draw instances"),
             contents: bytemuck::cast_slice(&instances),
@@ -592,14 +652,28 @@ impl Renderer {
             occlusion_query_set: None,
             multiview_mask: None,
         });
-        pass.set_pipeline(&self.pipeline);
         pass.set_vertex_buffer(0, cache.vertex_buffer().slice(..));
         pass.set_vertex_buffer(1, instance_buffer.slice(..));
         pass.set_index_buffer(cache.index_buffer().slice(..), wgpu::IndexFormat::Uint32);
         const INSTANCE_BYTES: u64 = std::mem::size_of::<DrawInstance>() as u64;
-        let draw = |pass: &mut wgpu::RenderPass<'_>| {
+        // `fill`: the surface, through the plain or the textured pipeline as each patch
+        // needs (slots of one model come together, so that switches once a model);
+        // else the wireframe overlay (the pipeline set by the caller, for every patch).
+        let draw = |pass: &mut wgpu::RenderPass<'_>, fill: bool| {
             let mut bound = None;
+            let mut current = None;
             for (k, &(model, s)) in draws.iter().enumerate() {
+                if fill {
+                    let tex = s.texture.as_ref().zip(textured);
+                    if current != Some(tex.is_some()) {
+                        pass.set_pipeline(tex.map_or(&self.pipeline, |(_, p)| p));
+                        current = Some(tex.is_some());
+                        bound = None;
+                    }
+                    if let Some((t, _)) = tex {
+                        pass.set_bind_group(1, &t.bind_group, &[]);
+                    }
+                }
                 if bound != Some(model) {
                     let offset = u64::from(model) * self.stride;
                     pass.set_bind_group(0, &self.bind_group, &[offset as u32]);
@@ -620,11 +694,34 @@ impl Renderer {
                 }
             }
         };
-        draw(&mut pass);
+        draw(&mut pass, true);
         if let (true, Some(wire)) = (self.wireframe.get(), &self.wire_pipeline) {
             pass.set_pipeline(wire);
-            draw(&mut pass);
+            draw(&mut pass, false);
         }
+    }
+
+    /// The textured pipeline: group 0 the frame uniforms, group 1 a patch texture of
+    /// `tex_layout` (the cache's), vertices with texture coordinates.
+    fn make_textured_pipeline(
+        &self,
+        device: &wgpu::Device,
+        tex_layout: &wgpu::BindGroupLayout,
+    ) -> wgpu::RenderPipeline {
+        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("tessera textured patch pipeline layout"),
+            bind_group_layouts: &[Some(&self.bind_group_layout), Some(tex_layout)],
+            immediate_size: 0,
+        });
+        let spec = PipelineSpec {
+            layout: &layout,
+            attributes: &TEXTURED_VERTEX_ATTRIBUTES,
+            vs: "vs_textured",
+            fs: "fs_textured",
+            polygon_mode: wgpu::PolygonMode::Fill,
+            bias: Default::default(),
+        };
+        patch_pipeline(device, &self.shader, self.color_format, &spec)
     }
 
     /// The offscreen colour and depth views (after [`Renderer::ensure_offscreen`]).

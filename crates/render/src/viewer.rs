@@ -20,7 +20,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use glam::DVec3;
-use tessera_format::{ModelIndex, PatchReader, ATTR_COLORS};
+use tessera_format::{ModelIndex, PatchReader, ATTR_COLORS, ATTR_TEXTURE};
 use tessera_page::{Pager, PagerOptions};
 use tessera_select::Camera;
 use tessera_stream::{
@@ -219,6 +219,8 @@ impl Viewer {
         for i in 0..v.models.len() {
             let levels = node_levels(v.models[i].index());
             v.cache.set_levels(i as u32, levels);
+            let textured = v.models[i].index().header().attributes & ATTR_TEXTURE != 0;
+            v.cache.set_textured(i as u32, textured);
             let (m, mut store) = v.parts(i);
             m.scheduler.load_roots(&mut m.pager, &mut store);
         }

@@ -17,7 +17,9 @@ fn patch_shader_validates() {
         .map(|e| e.name.as_str())
         .collect();
     assert!(
-        entry.contains(&"vs_main") && entry.contains(&"fs_main"),
+        ["vs_main", "fs_main", "vs_textured", "fs_textured"]
+            .iter()
+            .all(|e| entry.contains(e)),
         "{entry:?}"
     );
 }

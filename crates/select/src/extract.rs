@@ -96,6 +96,7 @@ pub fn write_cut_ply(
         normals: !mesh.normals.is_empty(),
         colors: !mesh.colors.is_empty(),
         uvs: !mesh.uvs.is_empty(),
+        textures: false,
     };
     let opts = PlyWriterOptions {
         attributes,

@@ -234,6 +234,8 @@ struct NodeFacts {
     triangles: u32,
     vertices: u32,
     level: u8,
+    /// The patch texture's size (`NodeRecord::texture_size`, `[0, 0]` without one).
+    texture_size: [u16; 2],
 }
 
 /// The per-frame policy over one model. See the module docs.
@@ -435,6 +437,7 @@ impl Scheduler {
                 triangles: n.triangle_count,
                 vertices: n.vertex_count,
                 level: n.level,
+                texture_size: n.texture_size,
             })
             .collect();
         let shown = index.nodes().len() as u64;
@@ -657,6 +660,7 @@ impl Scheduler {
             .map(|&m| {
                 let f = self.facts[m as usize];
                 store.estimate_bytes(f.vertices, f.triangles)
+                    + store.estimate_texture_bytes(f.texture_size)
             })
             .sum()
     }
@@ -1425,14 +1429,22 @@ fn group_failed(groups: &Groups, failed: &FxHashSet<u32>, g: u32) -> bool {
     groups.members(g).iter().any(|m| failed.contains(m))
 }
 
-/// Bytes a decoded patch occupies in RAM (array payloads; the small `Vec` headers are
-/// not counted). This is what the RAM budget counts.
+/// Bytes a decoded patch occupies in RAM (array payloads, the texture's texels and
+/// charts included; the small `Vec` headers are not counted). This is what the RAM
+/// budget counts.
 pub fn decoded_bytes(p: &PatchData) -> u64 {
     use std::mem::size_of;
+    let texture = p
+        .texture
+        .as_ref()
+        .map_or(0, |t| t.rgba.len() + t.encoded.len());
     (p.positions.len() * size_of::<[u32; 3]>()
         + p.normals.len() * size_of::<[f32; 3]>()
         + p.colors.len() * size_of::<[u8; 4]>()
         + p.uvs.len() * size_of::<[f32; 2]>()
         + p.morph_targets.len() * size_of::<[u32; 3]>()
-        + p.indices.len() * size_of::<u32>()) as u64
+        + p.indices.len() * size_of::<u32>()
+        + p.charts.len() * size_of::<tessera_format::TextureChart>()
+        + p.chart_ids.len() * size_of::<u16>()
+        + texture) as u64
 }

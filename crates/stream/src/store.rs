@@ -28,6 +28,14 @@ pub trait ResidentStore {
     fn estimate_bytes(&self, vertices: u32, triangles: u32) -> u64 {
         u64::from(vertices) * 24 + u64::from(triangles) * 12
     }
+    /// Bytes a patch texture of `size` texels (`NodeRecord::texture_size`, `[0, 0]` for
+    /// none) would take once uploaded, from the index alone; added to
+    /// [`ResidentStore::estimate_bytes`] for the demand. Default: 0 (a store that holds
+    /// no textures, as [`CountingStore`]).
+    fn estimate_texture_bytes(&self, size: [u16; 2]) -> u64 {
+        let _ = size;
+        0
+    }
     /// Whether `patches` (one residency group) would fit now, together: the scheduler
     /// uploads a group whole or not at all, and makes room (evicts) before it starts.
     /// A store whose space is not one pool (a GPU cache's vertex and index buffers)

@@ -17,12 +17,14 @@ use normals::{decode_normals, encode_normals};
 pub use normals::{oct_decode, oct_encode};
 
 use crate::error::FormatError;
-use crate::records::{NodeRecord, ATTR_COLORS, ATTR_NORMALS, ATTR_UVS, NO_NODE};
+use crate::records::{
+    NodeRecord, ATTR_COLORS, ATTR_NORMALS, ATTR_TEXTURE, ATTR_UVS, MAX_TEXTURE_DIM, NO_NODE,
+};
 
 /// Version of the patch encoding (byte 8 of every patch header).
-pub const PATCH_CODEC_VERSION: u8 = 3;
+pub const PATCH_CODEC_VERSION: u8 = 4;
 /// Bytes of the fixed patch header that precedes the section payload.
-pub const PATCH_HEADER_BYTES: usize = 40;
+pub const PATCH_HEADER_BYTES: usize = 48;
 /// Patch flag: the section payload is one zstd frame.
 pub const PATCH_FLAG_ZSTD: u8 = 1;
 /// Patch flag: the patch carries morph targets.
@@ -33,7 +35,7 @@ pub const MAX_PATCH_VERTICES: u32 = 1 << 22;
 pub const MAX_PATCH_TRIANGLES: u32 = 1 << 23;
 
 /// All `ATTR_*` bits this version knows.
-const ATTR_ALL: u32 = ATTR_NORMALS | ATTR_COLORS | ATTR_UVS;
+const ATTR_ALL: u32 = ATTR_NORMALS | ATTR_COLORS | ATTR_UVS | ATTR_TEXTURE;
 /// meshopt vertex codec version and level used by the encoder (the decoder reads any).
 const VERTEX_CODEC_VERSION: i32 = 1;
 /// Level 2 (meshoptimizer's default): on whole builds level 3 gave the same bytes on the
@@ -51,7 +53,151 @@ const SEC_NORMALS: usize = 2;
 const SEC_COLORS: usize = 3;
 const SEC_UVS: usize = 4;
 const SEC_MORPH: usize = 5;
-const SECTION_COUNT: usize = 6;
+const SEC_CHARTS: usize = 6;
+const SECTION_COUNT: usize = 7;
+/// Bytes of one chart record in the charts section.
+const CHART_BYTES: usize = 20;
+/// Bytes of the texture block's own header (codec, reserved, width, height).
+const TEXTURE_HEADER_BYTES: usize = 12;
+/// Most charts a patch may have (chart ids are u16).
+pub const MAX_PATCH_CHARTS: usize = u16::MAX as usize;
+
+/// How a patch texture's image is encoded (byte 0 of the texture block).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum TextureCodec {
+    /// PNG, lossless: the finest patches keep the source's texels exactly.
+    Png = 1,
+    /// Baseline JPEG.
+    Jpeg = 2,
+}
+
+impl TextureCodec {
+    fn from_byte(b: u8) -> Option<TextureCodec> {
+        match b {
+            1 => Some(TextureCodec::Png),
+            2 => Some(TextureCodec::Jpeg),
+            _ => None,
+        }
+    }
+
+    /// The `image` crate's format.
+    fn format(self) -> image::ImageFormat {
+        match self {
+            TextureCodec::Png => image::ImageFormat::Png,
+            TextureCodec::Jpeg => image::ImageFormat::Jpeg,
+        }
+    }
+}
+
+/// One chart of a patch texture: the affine map from a vertex's source UV (as the input
+/// file gave it) into the patch texture, `t = uv * scale + offset` per axis, in the
+/// patch texture's normalised coordinates (0..1, origin at the top-left texel's corner,
+/// v down as in glTF and WebGPU). A chart is a region of one source image (or, with
+/// `scale` 0, one solid colour texel for untextured vertices).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct TextureChart {
+    /// Index of the source texture (the importer's `TextureSource`), `u32::MAX` for a
+    /// solid-colour chart.
+    pub image: u32,
+    pub scale: [f32; 2],
+    pub offset: [f32; 2],
+}
+
+impl TextureChart {
+    /// Where `uv` lands in the patch texture.
+    #[inline]
+    pub fn map(&self, uv: [f32; 2]) -> [f32; 2] {
+        [
+            uv[0] * self.scale[0] + self.offset[0],
+            uv[1] * self.scale[1] + self.offset[1],
+        ]
+    }
+}
+
+/// A patch's texture: `encoded` (what the file stores) and/or `rgba` (decoded RGBA8,
+/// rows top to bottom, `4 * width * height` bytes). [`decode_patch`] fills `rgba` and
+/// leaves `encoded` empty; [`encode_patch`] writes `encoded`.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PatchTexture {
+    pub width: u32,
+    pub height: u32,
+    pub codec: Option<TextureCodec>,
+    pub encoded: Vec<u8>,
+    pub rgba: Vec<u8>,
+}
+
+impl PatchTexture {
+    /// Encodes RGBA8 texels with `codec` (`quality` 1..=100 for JPEG; JPEG drops alpha).
+    pub fn encode(
+        width: u32,
+        height: u32,
+        rgba: &[u8],
+        codec: TextureCodec,
+        quality: u8,
+    ) -> Result<PatchTexture, FormatError> {
+        let mut encoded = Vec::new();
+        let err = |e: image::ImageError| corrupt(format!("texture encoder: {e}"));
+        match codec {
+            TextureCodec::Png => {
+                use image::ImageEncoder;
+                image::codecs::png::PngEncoder::new_with_quality(
+                    &mut encoded,
+                    image::codecs::png::CompressionType::Fast,
+                    image::codecs::png::FilterType::Adaptive,
+                )
+                .write_image(rgba, width, height, image::ExtendedColorType::Rgba8)
+                .map_err(err)?;
+            }
+            TextureCodec::Jpeg => {
+                let rgb: Vec<u8> = rgba
+                    .chunks_exact(4)
+                    .flat_map(|p| [p[0], p[1], p[2]])
+                    .collect();
+                image::codecs::jpeg::JpegEncoder::new_with_quality(&mut encoded, quality)
+                    .encode(&rgb, width, height, image::ExtendedColorType::Rgb8)
+                    .map_err(err)?;
+            }
+        }
+        Ok(PatchTexture {
+            width,
+            height,
+            codec: Some(codec),
+            encoded,
+            rgba: Vec::new(),
+        })
+    }
+
+    /// Decodes `encoded` into `rgba`, checking the image is `width` x `height`.
+    pub fn decode_rgba(&mut self) -> Result<(), FormatError> {
+        let codec = self
+            .codec
+            .ok_or_else(|| corrupt("texture without a codec"))?;
+        let mut reader = image::ImageReader::with_format(
+            std::io::Cursor::new(&self.encoded[..]),
+            codec.format(),
+        );
+        let mut limits = image::Limits::default();
+        limits.max_image_width = Some(MAX_TEXTURE_DIM);
+        limits.max_image_height = Some(MAX_TEXTURE_DIM);
+        limits.max_alloc = Some(4 * u64::from(MAX_TEXTURE_DIM).pow(2) + (1 << 20));
+        reader.limits(limits);
+        let img = reader
+            .decode()
+            .map_err(|e| corrupt(format!("texture: {e}")))?;
+        if img.width() != self.width || img.height() != self.height {
+            return Err(corrupt(format!(
+                "texture decodes to {}x{}, the patch says {}x{}",
+                img.width(),
+                img.height(),
+                self.width,
+                self.height
+            )));
+        }
+        self.rgba = img.into_rgba8().into_raw();
+        self.encoded = Vec::new();
+        Ok(())
+    }
+}
 
 /// One node's decoded mesh patch.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -69,6 +215,12 @@ pub struct PatchData {
     pub morph_targets: Vec<[u32; 3]>,
     /// Triangle list, 3 indices per triangle.
     pub indices: Vec<u32>,
+    /// The charts of the patch texture ([`ATTR_TEXTURE`]); empty otherwise.
+    pub charts: Vec<TextureChart>,
+    /// Per vertex: its chart (an index into `charts`); empty unless [`ATTR_TEXTURE`].
+    pub chart_ids: Vec<u16>,
+    /// The patch texture ([`ATTR_TEXTURE`], patches with vertices).
+    pub texture: Option<PatchTexture>,
 }
 
 impl PatchData {
@@ -128,6 +280,46 @@ pub fn encode_patch(patch: &PatchData, attributes: u32, quant_min: [u32; 3]) -> 
         "index out of range"
     );
 
+    let textured = attributes & ATTR_TEXTURE != 0;
+    assert!(
+        !textured || attributes & ATTR_UVS != 0,
+        "ATTR_TEXTURE without ATTR_UVS"
+    );
+    if textured && n > 0 {
+        assert_eq!(patch.chart_ids.len(), n, "chart_ids length");
+        assert!(
+            !patch.charts.is_empty() && patch.charts.len() <= MAX_PATCH_CHARTS,
+            "{} charts",
+            patch.charts.len()
+        );
+        assert!(
+            patch
+                .chart_ids
+                .iter()
+                .all(|&c| (c as usize) < patch.charts.len()),
+            "chart id out of range"
+        );
+        let t = patch
+            .texture
+            .as_ref()
+            .expect("a textured patch has a texture");
+        assert!(
+            (1..=MAX_TEXTURE_DIM).contains(&t.width)
+                && (1..=MAX_TEXTURE_DIM).contains(&t.height)
+                && t.codec.is_some()
+                && !t.encoded.is_empty(),
+            "texture {}x{} with {} encoded bytes",
+            t.width,
+            t.height,
+            t.encoded.len()
+        );
+    } else {
+        assert!(
+            patch.charts.is_empty() && patch.chart_ids.is_empty() && patch.texture.is_none(),
+            "texture data in a patch without texture"
+        );
+    }
+
     let mut sections: [Vec<u8>; SECTION_COUNT] = Default::default();
     if n > 0 {
         if triangles > 0 {
@@ -167,6 +359,29 @@ pub fn encode_patch(patch: &PatchData, attributes: u32, quant_min: [u32; 3]) -> 
         if !patch.morph_targets.is_empty() {
             sections[SEC_MORPH] = encode_morph(&patch.positions, &patch.morph_targets);
         }
+        if textured {
+            let c = &mut sections[SEC_CHARTS];
+            c.extend_from_slice(&(patch.charts.len() as u32).to_le_bytes());
+            for ch in &patch.charts {
+                c.extend_from_slice(&ch.image.to_le_bytes());
+                for f in [ch.scale[0], ch.scale[1], ch.offset[0], ch.offset[1]] {
+                    c.extend_from_slice(&f.to_le_bytes());
+                }
+            }
+            for id in &patch.chart_ids {
+                c.extend_from_slice(&id.to_le_bytes());
+            }
+        }
+    }
+    // The texture block goes after the payload, outside zstd (PNG and JPEG are
+    // compressed already).
+    let mut texture_block = Vec::new();
+    if let Some(t) = patch.texture.as_ref().filter(|_| textured && n > 0) {
+        texture_block.push(t.codec.expect("checked") as u8);
+        texture_block.extend_from_slice(&[0; 3]);
+        texture_block.extend_from_slice(&t.width.to_le_bytes());
+        texture_block.extend_from_slice(&t.height.to_le_bytes());
+        texture_block.extend_from_slice(&t.encoded);
     }
 
     let raw: Vec<u8> = sections.concat();
@@ -184,7 +399,7 @@ pub fn encode_patch(patch: &PatchData, attributes: u32, quant_min: [u32; 3]) -> 
         }
     }
 
-    let mut out = Vec::with_capacity(PATCH_HEADER_BYTES + payload.len());
+    let mut out = Vec::with_capacity(PATCH_HEADER_BYTES + payload.len() + texture_block.len());
     out.extend_from_slice(&(n as u32).to_le_bytes());
     out.extend_from_slice(&(triangles as u32).to_le_bytes());
     out.push(PATCH_CODEC_VERSION);
@@ -195,8 +410,10 @@ pub fn encode_patch(patch: &PatchData, attributes: u32, quant_min: [u32; 3]) -> 
     for s in &sections {
         out.extend_from_slice(&(s.len() as u32).to_le_bytes());
     }
+    out.extend_from_slice(&(texture_block.len() as u32).to_le_bytes());
     debug_assert_eq!(out.len(), PATCH_HEADER_BYTES);
     out.extend_from_slice(&payload);
+    out.extend_from_slice(&texture_block);
     out
 }
 
@@ -276,6 +493,8 @@ pub struct PatchShape {
     pub quant_min: [u32; 3],
     pub vertex_count: u32,
     pub triangle_count: u32,
+    /// The node's `texture_size` (`[0, 0]` without [`ATTR_TEXTURE`]).
+    pub texture_size: [u16; 2],
 }
 
 impl From<&NodeRecord> for PatchShape {
@@ -284,6 +503,7 @@ impl From<&NodeRecord> for PatchShape {
             quant_min: n.quant_min,
             vertex_count: n.vertex_count,
             triangle_count: n.triangle_count,
+            texture_size: n.texture_size,
         }
     }
 }
@@ -297,10 +517,23 @@ pub fn decode_patch(
     attributes: u32,
     shape: PatchShape,
 ) -> Result<PatchData, FormatError> {
+    decode_patch_with(bytes, attributes, shape, true)
+}
+
+/// [`decode_patch`], decoding the texture's image only when `texels` (picking and
+/// geometry checks need no texels: the texture block is still checked for its header
+/// and size, and kept encoded).
+pub fn decode_patch_with(
+    bytes: &[u8],
+    attributes: u32,
+    shape: PatchShape,
+    texels: bool,
+) -> Result<PatchData, FormatError> {
     let PatchShape {
         quant_min,
         vertex_count,
         triangle_count,
+        texture_size,
     } = shape;
     if bytes.len() < PATCH_HEADER_BYTES {
         return Err(corrupt(format!(
@@ -316,6 +549,7 @@ pub fn decode_patch(
     let reserved = bytes[11];
     let raw_len = le_u32(bytes, 12) as u64;
     let lens: [u64; SECTION_COUNT] = std::array::from_fn(|k| le_u32(bytes, 16 + 4 * k) as u64);
+    let texture_bytes = le_u32(bytes, 16 + 4 * SECTION_COUNT as usize) as usize;
 
     if version != PATCH_CODEC_VERSION {
         return Err(corrupt(format!("unknown patch codec version {version}")));
@@ -344,6 +578,26 @@ pub fn decode_patch(
         return Err(corrupt("triangles without vertices"));
     }
     let morph = flags & PATCH_FLAG_MORPH != 0;
+    let textured = attributes & ATTR_TEXTURE != 0;
+    if textured && attributes & ATTR_UVS == 0 {
+        return Err(corrupt("textures without UVs"));
+    }
+    let wants_texture = textured && n > 0;
+    if wants_texture != (texture_bytes > 0) {
+        return Err(corrupt(format!(
+            "texture block of {texture_bytes} bytes in a patch that {} one",
+            if wants_texture {
+                "needs"
+            } else {
+                "has no use for"
+            }
+        )));
+    }
+    if (texture_size != [0, 0]) != wants_texture {
+        return Err(corrupt(format!(
+            "node record's texture size {texture_size:?} does not fit the patch"
+        )));
+    }
     let n64 = n as u64;
     let present = |on: bool, size: u64| if on && n > 0 { Some(size) } else { None };
     let expected: [Option<u64>; SECTION_COUNT] = [
@@ -353,6 +607,7 @@ pub fn decode_patch(
         present(attributes & ATTR_COLORS != 0, 4),
         present(attributes & ATTR_UVS != 0, 8),
         present(morph, 12),
+        present(textured, 0),
     ];
     let mut sum = 0u64;
     for (k, (&len, exp)) in lens.iter().zip(expected).enumerate() {
@@ -360,6 +615,7 @@ pub fn decode_patch(
             None => 0,
             Some(_) if k == SEC_INDICES => index_section_bound(t as u64),
             Some(_) if k == SEC_MORPH => 4 + 5 * n64 + vertex_section_bound(n64, 12),
+            Some(_) if k == SEC_CHARTS => 4 + (CHART_BYTES * MAX_PATCH_CHARTS) as u64 + 2 * n64,
             Some(size) => vertex_section_bound(n64, size),
         };
         if exp.is_some() && len == 0 || len > bound {
@@ -373,7 +629,17 @@ pub fn decode_patch(
         )));
     }
 
-    let stored = &bytes[PATCH_HEADER_BYTES..];
+    let Some(payload_end) = bytes
+        .len()
+        .checked_sub(texture_bytes)
+        .filter(|&e| e >= PATCH_HEADER_BYTES)
+    else {
+        return Err(corrupt(format!(
+            "texture block of {texture_bytes} bytes does not fit a {}-byte patch",
+            bytes.len()
+        )));
+    };
+    let stored = &bytes[PATCH_HEADER_BYTES..payload_end];
     let payload: Cow<[u8]> = if flags & PATCH_FLAG_ZSTD != 0 {
         let out =
             zstd_decompress(stored, raw_len as usize).map_err(|e| corrupt(format!("zstd: {e}")))?;
@@ -440,8 +706,80 @@ pub fn decode_patch(
     if morph {
         patch.morph_targets = decode_morph(secs[SEC_MORPH], &positions)?;
     }
+    if textured {
+        (patch.charts, patch.chart_ids) = decode_charts(secs[SEC_CHARTS], nu)?;
+        let mut t = decode_texture_block(&bytes[payload_end..], texture_size)?;
+        if texels {
+            t.decode_rgba()?;
+        }
+        patch.texture = Some(t);
+    }
     patch.positions = positions;
     Ok(patch)
+}
+
+/// The charts section: `u32 count`, `count` charts, `n` u16 chart ids.
+fn decode_charts(sec: &[u8], n: usize) -> Result<(Vec<TextureChart>, Vec<u16>), FormatError> {
+    let count = le_u32(sec, 0) as usize;
+    if sec.len() < 4 || count == 0 || count > MAX_PATCH_CHARTS {
+        return Err(corrupt(format!("{count} texture charts")));
+    }
+    if sec.len() != 4 + CHART_BYTES * count + 2 * n {
+        return Err(corrupt(format!(
+            "charts section of {} bytes for {count} charts and {n} vertices",
+            sec.len()
+        )));
+    }
+    let f = |at: usize| f32::from_le_bytes(sec[at..at + 4].try_into().expect("4 bytes"));
+    let charts: Vec<TextureChart> = (0..count)
+        .map(|k| {
+            let at = 4 + CHART_BYTES * k;
+            TextureChart {
+                image: le_u32(sec, at),
+                scale: [f(at + 4), f(at + 8)],
+                offset: [f(at + 12), f(at + 16)],
+            }
+        })
+        .collect();
+    if charts
+        .iter()
+        .any(|c| !(c.scale.iter().chain(&c.offset).all(|v| v.is_finite())))
+    {
+        return Err(corrupt("non-finite texture chart"));
+    }
+    let ids_at = 4 + CHART_BYTES * count;
+    let ids: Vec<u16> = sec[ids_at..]
+        .chunks_exact(2)
+        .map(|b| u16::from_le_bytes([b[0], b[1]]))
+        .collect();
+    if let Some(bad) = ids.iter().find(|&&c| c as usize >= count) {
+        return Err(corrupt(format!("chart id {bad} of {count} charts")));
+    }
+    Ok((charts, ids))
+}
+
+/// The texture block: codec byte, 3 zero bytes, width, height, the encoded image.
+fn decode_texture_block(b: &[u8], size: [u16; 2]) -> Result<PatchTexture, FormatError> {
+    if b.len() <= TEXTURE_HEADER_BYTES {
+        return Err(corrupt(format!("texture block of {} bytes", b.len())));
+    }
+    let codec = TextureCodec::from_byte(b[0])
+        .filter(|_| b[1..4] == [0; 3])
+        .ok_or_else(|| corrupt(format!("unknown texture codec {}", b[0])))?;
+    let (width, height) = (le_u32(b, 4), le_u32(b, 8));
+    if [width, height] != [u32::from(size[0]), u32::from(size[1])] {
+        return Err(corrupt(format!(
+            "texture is {width}x{height}, the node record says {}x{}",
+            size[0], size[1]
+        )));
+    }
+    Ok(PatchTexture {
+        width,
+        height,
+        codec: Some(codec),
+        encoded: b[TEXTURE_HEADER_BYTES..].to_vec(),
+        rgba: Vec::new(),
+    })
 }
 
 fn decode_vertices<T: Clone + Default>(

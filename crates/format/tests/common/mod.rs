@@ -102,6 +102,7 @@ pub fn terrain_patch(cells: usize, spacing: f64, morph: bool, seed: u64) -> Patc
         uvs: Vec::new(),
         morph_targets,
         indices,
+        ..Default::default()
     }
 }
 

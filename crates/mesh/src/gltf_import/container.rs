@@ -241,7 +241,7 @@ fn meshopt_fallback(buffer: &json::Buffer) -> bool {
 }
 
 /// At most 60 characters of a URI for a message (data URIs run to megabytes).
-fn clip(s: &str) -> String {
+pub(crate) fn clip(s: &str) -> String {
     match s.char_indices().nth(60) {
         Some((cut, _)) => format!("{}...", &s[..cut]),
         None => s.to_string(),
@@ -250,7 +250,7 @@ fn clip(s: &str) -> String {
 
 /// The first `need` bytes (or all, if fewer) of a `data:` URI, given after `data:`
 /// (`[mediatype][;base64],payload`).
-fn decode_data_uri(rest: &str, need: u64) -> Result<Vec<u8>, String> {
+pub(crate) fn decode_data_uri(rest: &str, need: u64) -> Result<Vec<u8>, String> {
     let (meta, payload) = rest
         .split_once(',')
         .ok_or_else(|| "no ',' before the data".to_string())?;
@@ -278,7 +278,7 @@ fn decode_data_uri(rest: &str, need: u64) -> Result<Vec<u8>, String> {
 }
 
 /// `%20` -> ` ` (URIs of files with spaces); `None` for a bad escape or non-UTF-8 result.
-fn percent_decode(s: &str) -> Option<String> {
+pub(crate) fn percent_decode(s: &str) -> Option<String> {
     let b = s.as_bytes();
     let mut out = Vec::with_capacity(b.len());
     let mut i = 0;

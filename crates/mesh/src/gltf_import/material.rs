@@ -1,15 +1,14 @@
-//! What a glTF material gives the vertices of its primitives while textures are not
-//! carried by the build: its base colour factor (multiplied into `COLOR_0`, or the colour
-//! of an untextured primitive without one), the texture coordinate set of its base colour
-//! texture and that texture's `KHR_texture_transform`, applied to the UVs so they are the
-//! ones a renderer samples; and the one warning that names the textured materials whose
-//! images are not used yet.
+//! What a glTF material gives the vertices of its primitives: its base colour factor
+//! (multiplied into `COLOR_0`, or the colour of a primitive without one; the fallback
+//! colour of a textured one), the texture coordinate set of its base colour texture and
+//! that texture's `KHR_texture_transform`, applied to the UVs so they are the ones a
+//! renderer samples. Its texture itself is resolved in [`super::texture`].
 
 use std::path::Path;
 
 use ::gltf::json;
 
-use crate::{ImportReport, MeshError};
+use crate::MeshError;
 
 /// What a primitive's material contributes to its vertices.
 #[derive(Clone, Debug)]
@@ -82,55 +81,6 @@ impl MaterialUse {
             uv_set,
             uv_transform,
         })
-    }
-}
-
-/// One warning naming the textured materials whose images are not used yet.
-pub(super) fn warn_textures<'a>(
-    path: &Path,
-    root: &json::Root,
-    uses: impl Iterator<Item = &'a MaterialUse>,
-    report: &mut ImportReport,
-) {
-    let mut seen = Vec::new();
-    for u in uses.filter(|u| u.textured) {
-        let Some(i) = u.index else { continue };
-        if seen.contains(&i) {
-            continue;
-        }
-        seen.push(i);
-        let m = &root.materials[i];
-        let image = m
-            .pbr_metallic_roughness
-            .base_color_texture
-            .as_ref()
-            .and_then(|t| root.textures.get(t.index.value()))
-            .and_then(|t| {
-                root.images
-                    .get(t.source.value())
-                    .map(|img| (t.source.value(), img))
-            })
-            .map(|(k, img)| match (&img.name, &img.uri) {
-                (Some(n), _) => format!("image '{n}'"),
-                (None, Some(u)) if !u.starts_with("data:") => format!("image '{u}'"),
-                _ => format!("image {k}"),
-            })
-            .unwrap_or_else(|| "a missing image".to_string());
-        let name = m.name.clone().unwrap_or_else(|| format!("material {i}"));
-        report.textures_not_used.push(format!("{name} ({image})"));
-    }
-    let n = report.textures_not_used.len();
-    if n > 0 {
-        let (s, it, its) = if n > 1 {
-            ("s", "they are", "their")
-        } else {
-            ("", "it is", "its")
-        };
-        tracing::warn!(
-            "{}: textures are not used yet: the image{s} of {n} textured material{s} ignored: {}; {it} drawn in {its} base colour factor x vertex colour, {its} UVs kept",
-            path.display(),
-            report.textures_not_used.join(", "),
-        );
     }
 }
 

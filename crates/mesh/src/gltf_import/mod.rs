@@ -29,9 +29,15 @@
 //! Colours: glTF's `COLOR_0` and `baseColorFactor` are linear; Tessera's colours are
 //! displayed as they are (like the sRGB bytes of a PLY), so they are encoded to sRGB.
 //!
-//! Textures are not carried by the build yet: textured materials are drawn in their base
-//! colour factor (x `COLOR_0`), their UVs are kept, and one warning names them (also in
-//! [`ImportReport::textures_not_used`]), so a model never turns black or silently wrong.
+//! Textures: a primitive whose material has a base colour texture read through
+//! `TEXCOORD_0`, in PNG or JPEG, samples it: its vertices carry the index of the
+//! texture's [`crate::TextureSource`] (where the image's bytes are, its size from its
+//! header, the sampler's wrap modes, the base colour factor as tint), their UVs as the
+//! file gives them (through `KHR_texture_transform`) and their colour stays the base
+//! colour factor x `COLOR_0`, the fallback ([`texture`]). Textures that are not used
+//! (another coordinate set, another image format, a missing or unreadable image) are
+//! named in the report and a warning; their vertices are untextured, so a model never
+//! turns black or silently wrong.
 //! `KHR_draco_mesh_compression` is refused with a message saying how to decompress.
 
 mod accessor;
@@ -39,6 +45,7 @@ mod container;
 mod material;
 mod primitive;
 mod scene;
+mod texture;
 
 use std::collections::HashMap;
 use std::path::Path;
@@ -47,7 +54,7 @@ use ::gltf::json;
 use json::validation::Checked;
 
 use crate::common::{finish_report, note_ignored, PolygonEmitter};
-use crate::{Attributes, ImportReport, MeshError, MeshHeader, MeshVisitor};
+use crate::{Attributes, ImportReport, MeshError, MeshHeader, MeshVisitor, NO_TEXTURE};
 use container::{BufferData, Resolver, Views};
 use material::MaterialUse;
 use scene::Mat4;
@@ -58,8 +65,8 @@ pub(crate) use container::GLB_MAGIC;
 /// small enough (a few MB of scratch) to keep memory flat.
 const CHUNK: usize = 1 << 16;
 
-/// Extensions a file may require. The image formats are harmless while textures are not
-/// used (their materials are drawn in their base colour, with the warning).
+/// Extensions a file may require. The image formats are harmless: textures only in them
+/// are not used (their materials are drawn in their base colour, with a warning).
 const SUPPORTED_REQUIRED: &[&str] = &[
     "KHR_mesh_quantization",
     "EXT_meshopt_compression",
@@ -101,7 +108,12 @@ pub(crate) fn read_gltf_from(
     let mut instances = scene::instances(path, &root)?;
     // Mesh by mesh, so each mesh's compressed views are decoded once for its instances.
     instances.sort_by_key(|i| i.mesh);
-    let draws = plan(path, &root, &instances, &mut report)?;
+    let mut draws = plan(path, &root, &instances, &mut report)?;
+    let mut textures = texture::Textures::new(path, &root, bytes, parts.bin.clone(), base_dir);
+    for d in &mut draws {
+        d.texture = textures.of_draw(d, &mut report);
+    }
+    textures.warn(&report);
 
     // Open the buffers the draws read.
     let resolver = Resolver {
@@ -148,8 +160,14 @@ pub(crate) fn read_gltf_from(
         colors: draws
             .iter()
             .any(|d| d.color.is_some() || d.material.factor != [1.0; 4]),
+        textures: draws.iter().any(|d| {
+            d.texture != NO_TEXTURE
+                && root
+                    .accessors
+                    .get(d.position)
+                    .is_some_and(|a| a.count.0 > 0)
+        }),
     };
-    material::warn_textures(path, &root, draws.iter().map(|d| &d.material), &mut report);
     visitor.header(&MeshHeader {
         attributes,
         vertex_count: Some(vertex_total),
@@ -322,6 +340,8 @@ struct Draw {
     color: Option<usize>,
     indices: Option<usize>,
     material: MaterialUse,
+    /// The texture its vertices sample ([`NO_TEXTURE`]: none); only with `uv`.
+    texture: u32,
 }
 
 impl Draw {
@@ -445,6 +465,7 @@ fn plan(
                 color: attr(Semantic::Colors(0)),
                 indices: prim.indices.map(|i| i.value()),
                 material,
+                texture: NO_TEXTURE,
             });
         }
     }

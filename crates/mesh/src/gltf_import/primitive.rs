@@ -118,6 +118,9 @@ pub(super) fn emit_draw(
                 position,
                 ..Vertex::default()
             };
+            if uv.is_some() {
+                v.texture = d.texture;
+            }
             if normal.is_some() {
                 let [x, y, z, _] = n[k].map(f64::from);
                 let w: [f64; 3] =

@@ -96,3 +96,20 @@ pub fn f32be(out: &mut Vec<u8>, xs: &[f32]) {
         out.extend_from_slice(&x.to_be_bytes());
     }
 }
+
+/// A `w` x `h` PNG (a gradient, so the bytes are not trivial).
+pub fn png(w: u32, h: u32) -> Vec<u8> {
+    encode(w, h, image::ImageFormat::Png)
+}
+
+/// A `w` x `h` JPEG.
+pub fn jpeg(w: u32, h: u32) -> Vec<u8> {
+    encode(w, h, image::ImageFormat::Jpeg)
+}
+
+fn encode(w: u32, h: u32, format: image::ImageFormat) -> Vec<u8> {
+    let img = image::RgbImage::from_fn(w, h, |x, y| image::Rgb([x as u8, y as u8, 128]));
+    let mut out = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut out, format).expect("encode test image");
+    out.into_inner()
+}

@@ -1,0 +1,817 @@
+//! Stage 3b: a texture per patch, cut from the source images (GoLD, section 3.3).
+//!
+//! Each patch's vertices fall into *charts*: the connected pieces of the patch that
+//! sample one source image (vertices are split at UV seams and between materials, so a
+//! chart is a connected set of vertex indices of one texture). For each chart the
+//! builder takes the rectangle of source texels its UVs cover (its vertices' UVs and
+//! their morph targets' UVs, so geomorphing stays inside it), grown by a gutter so
+//! filtering never reads a neighbour, at the pyramid level the patch's error needs:
+//! leaves (error 0) take the source texels unaltered, coarser patches a box-filtered
+//! level whose texel is about their model-space error. The rectangles are packed into
+//! one texture per patch (a *crop* when there is one rectangle, an *atlas* of several
+//! otherwise) whose side never exceeds [`MAX_TEXTURE_DIM`]: a patch whose rectangles
+//! would not fit takes the next coarser level and is counted as downsampled to fit.
+//! Each chart's map from source UV to patch texture is stored with the patch
+//! ([`TextureChart`]); untextured vertices of a textured model (a material without an
+//! image, an image that cannot be read) get solid-colour texels of their vertex colour.
+//!
+//! The shelf packer and the box filter are written here: they are a few lines each, and
+//! the packing crates on crates.io pack into fixed bins or need the whole set at once
+//! with rotation, which would break the affine UV maps.
+
+use std::io::{Read, Seek, SeekFrom};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, OnceLock};
+
+use rustc_hash::FxHashMap;
+use tessera_format::{PatchTexture, TextureChart, TextureCodec, MAX_PATCH_CHARTS, MAX_TEXTURE_DIM};
+use tessera_mesh::{ImageSource, TextureSource, Wrap, NO_TEXTURE};
+
+use crate::patch::WorkVertex;
+use crate::BuildError;
+
+/// Texels of gutter around every chart rectangle (bilinear filtering reads one texel
+/// beyond a chart's edge; mip level 1 of the patch texture reads two).
+const GUTTER: i64 = 2;
+/// Side of the solid block of one untextured colour.
+const SOLID: i64 = 4;
+/// Most distinct solid colours a patch keeps; more are quantised to 4 bits a channel.
+const MAX_SOLID_COLORS: usize = 1024;
+/// A coarse patch's texel, in units of its model-space error. 1: at the tolerance that
+/// selects the patch, a texel projects to about one tolerance, as its geometry does.
+const TEXEL_PER_ERROR: f64 = 1.0;
+
+/// How patch textures are stored.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TextureOptions {
+    pub codec: TextureCodec,
+    /// JPEG quality 1..=100 (ignored for PNG).
+    pub quality: u8,
+}
+
+impl Default for TextureOptions {
+    fn default() -> Self {
+        TextureOptions {
+            codec: TextureCodec::Png,
+            quality: 90,
+        }
+    }
+}
+
+/// What the texture stage did, for the build report.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct TextureReport {
+    /// Source images read (decoded), and their texels.
+    pub source_images: u64,
+    pub source_texels: u64,
+    /// Patches whose texture is one rectangle of one image (GoLD's crop).
+    pub crops: u64,
+    /// Patches whose texture packs several rectangles (charts, images, solid colours).
+    pub atlases: u64,
+    /// Patches whose texture holds solid colours only (no image).
+    pub solid_only: u64,
+    /// Patches that took a coarser level than their error asked, to fit
+    /// [`MAX_TEXTURE_DIM`].
+    pub downsampled_to_fit: u64,
+    /// Texels of all patch textures, and of the leaves' alone.
+    pub texels: u64,
+    pub leaf_texels: u64,
+    /// Encoded bytes of all patch textures.
+    pub bytes: u64,
+    /// Images that could not be read, each once as `name: why`; their vertices are drawn
+    /// in their vertex colour.
+    pub unreadable_images: Vec<String>,
+    /// Times a source image was decoded again after the memory bound evicted it.
+    pub image_redecodes: u64,
+}
+
+/// One source image and its box-filtered pyramid (level 0 = the source).
+struct Pyramid {
+    levels: Vec<Level>,
+}
+
+struct Level {
+    w: u32,
+    h: u32,
+    rgba: Vec<u8>,
+}
+
+impl Pyramid {
+    fn new(w: u32, h: u32, rgba: Vec<u8>) -> Pyramid {
+        let mut levels = vec![Level { w, h, rgba }];
+        while let Some(l) = levels.last().filter(|l| l.w > 1 || l.h > 1) {
+            levels.push(half(l));
+        }
+        Pyramid { levels }
+    }
+
+    fn bytes(&self) -> u64 {
+        self.levels.iter().map(|l| l.rgba.len() as u64).sum()
+    }
+}
+
+/// The next pyramid level: `ceil(w/2) x ceil(h/2)`, each texel the mean of the (up to)
+/// four it covers.
+fn half(l: &Level) -> Level {
+    let (w, h) = (l.w.div_ceil(2), l.h.div_ceil(2));
+    let mut rgba = vec![0u8; (w * h * 4) as usize];
+    for y in 0..h {
+        for x in 0..w {
+            let mut sum = [0u32; 4];
+            let mut n = 0;
+            for (sx, sy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                let (xx, yy) = (2 * x + sx, 2 * y + sy);
+                if xx < l.w && yy < l.h {
+                    let o = ((yy * l.w + xx) * 4) as usize;
+                    for c in 0..4 {
+                        sum[c] += l.rgba[o + c] as u32;
+                    }
+                    n += 1;
+                }
+            }
+            let o = ((y * w + x) * 4) as usize;
+            for c in 0..4 {
+                rgba[o + c] = ((sum[c] + n / 2) / n) as u8;
+            }
+        }
+    }
+    Level { w, h, rgba }
+}
+
+type Decoded = Result<Arc<Pyramid>, String>;
+
+/// Decoded source images, shared by the build threads, bounded by bytes: the least
+/// recently used pyramid is dropped when a new one would exceed the bound (a later
+/// patch needing it decodes it again, counted in [`TextureReport::image_redecodes`]).
+struct ImageCache {
+    budget: u64,
+    slots: FxHashMap<ImageSource, (Arc<OnceLock<Decoded>>, u64)>,
+    clock: u64,
+    decoded_before: rustc_hash::FxHashSet<ImageSource>,
+}
+
+/// Cuts the textures of every patch; see the module docs.
+pub struct Baker {
+    sources: Vec<TextureSource>,
+    options: TextureOptions,
+    cache: Mutex<ImageCache>,
+    report: Mutex<TextureReport>,
+    texels: AtomicU64,
+    leaf_texels: AtomicU64,
+    bytes: AtomicU64,
+}
+
+/// A patch's texture, ready for the patch encoder.
+pub struct BakedTexture {
+    pub charts: Vec<TextureChart>,
+    pub chart_ids: Vec<u16>,
+    pub texture: PatchTexture,
+}
+
+/// A rectangle of one image's pyramid level that some charts share.
+#[derive(Clone, Debug)]
+struct Rect {
+    /// Texture index (into the sources) or `NO_TEXTURE` for a solid colour.
+    texture: u32,
+    level: usize,
+    /// Texel bounds at `level`, gutter included (may extend beyond the image: wrapped).
+    x0: i64,
+    y0: i64,
+    x1: i64,
+    y1: i64,
+    /// Solid colour (when `texture == NO_TEXTURE`).
+    color: [u8; 4],
+    /// Placement in the patch texture.
+    dx: i64,
+    dy: i64,
+}
+
+impl Rect {
+    fn w(&self) -> i64 {
+        self.x1 - self.x0
+    }
+    fn h(&self) -> i64 {
+        self.y1 - self.y0
+    }
+    fn overlaps(&self, o: &Rect) -> bool {
+        self.texture == o.texture
+            && self.level == o.level
+            && self.x0 < o.x1
+            && o.x0 < self.x1
+            && self.y0 < o.y1
+            && o.y0 < self.y1
+    }
+}
+
+fn find(parent: &mut [u32], mut i: u32) -> u32 {
+    while parent[i as usize] != i {
+        parent[i as usize] = parent[parent[i as usize] as usize];
+        i = parent[i as usize];
+    }
+    i
+}
+
+impl Baker {
+    pub fn new(sources: Vec<TextureSource>, options: TextureOptions, memory_bytes: u64) -> Baker {
+        Baker {
+            sources,
+            options,
+            cache: Mutex::new(ImageCache {
+                budget: memory_bytes.max(64 << 20),
+                slots: FxHashMap::default(),
+                clock: 0,
+                decoded_before: Default::default(),
+            }),
+            report: Mutex::new(TextureReport::default()),
+            texels: AtomicU64::new(0),
+            leaf_texels: AtomicU64::new(0),
+            bytes: AtomicU64::new(0),
+        }
+    }
+
+    /// The report so far (call once the hierarchy is built).
+    pub fn report(&self) -> TextureReport {
+        let mut r = self.report.lock().map(|r| r.clone()).unwrap_or_default();
+        r.texels = self.texels.load(Ordering::Relaxed);
+        r.leaf_texels = self.leaf_texels.load(Ordering::Relaxed);
+        r.bytes = self.bytes.load(Ordering::Relaxed);
+        r
+    }
+
+    /// The pyramid of texture `t`'s image, decoding it on first use (one thread decodes,
+    /// the others wait for it); `None` when it cannot be read (reported once).
+    fn pyramid(&self, t: u32) -> Option<Arc<Pyramid>> {
+        let src = self.sources.get(t as usize)?;
+        let cell = {
+            let mut c = self.cache.lock().ok()?;
+            c.clock += 1;
+            let clock = c.clock;
+            let cell = c
+                .slots
+                .entry(src.image.clone())
+                .or_insert_with(|| (Arc::new(OnceLock::new()), clock));
+            cell.1 = clock;
+            cell.0.clone()
+        };
+        let decoded = cell.get_or_init(|| self.decode(src));
+        match decoded {
+            Ok(p) => Some(p.clone()),
+            Err(_) => None,
+        }
+    }
+
+    fn decode(&self, src: &TextureSource) -> Decoded {
+        let result = read_image(&src.image).map(|(w, h, rgba)| Arc::new(Pyramid::new(w, h, rgba)));
+        let mut report = self.report.lock().map_err(|_| "poisoned".to_string())?;
+        match &result {
+            Ok(p) => {
+                let mut c = self.cache.lock().map_err(|_| "poisoned".to_string())?;
+                if !c.decoded_before.insert(src.image.clone()) {
+                    report.image_redecodes += 1;
+                } else {
+                    report.source_images += 1;
+                    report.source_texels += u64::from(p.levels[0].w) * u64::from(p.levels[0].h);
+                }
+                // Evict least recently used decoded pyramids beyond the budget.
+                let mut held: u64 = c
+                    .slots
+                    .values()
+                    .filter_map(|(cell, _)| cell.get().and_then(|d| d.as_ref().ok()))
+                    .map(|p| p.bytes())
+                    .sum::<u64>()
+                    + p.bytes();
+                while held > c.budget {
+                    let victim = c
+                        .slots
+                        .iter()
+                        .filter(|(k, (cell, _))| {
+                            **k != src.image && matches!(cell.get(), Some(Ok(_)))
+                        })
+                        .min_by_key(|(_, (_, t))| *t)
+                        .map(|(k, (cell, _))| (k.clone(), cell.clone()));
+                    let Some((k, cell)) = victim else { break };
+                    if let Some(Ok(p)) = cell.get() {
+                        held = held.saturating_sub(p.bytes());
+                    }
+                    c.slots.remove(&k);
+                }
+            }
+            Err(e) => {
+                let line = format!("{}: {e}", src.image_name);
+                if !report.unreadable_images.contains(&line) {
+                    tracing::warn!("texture image {line}; its faces are drawn in their colour");
+                    report.unreadable_images.push(line);
+                }
+            }
+        }
+        result
+    }
+
+    /// The texture of one patch. `target_uvs` (empty for roots) holds each vertex's
+    /// morph target's UV; `error` is the patch's model-space error (0 for leaves) and
+    /// `step` the model units per grid step.
+    pub fn bake(
+        &self,
+        vertices: &[WorkVertex],
+        indices: &[u32],
+        target_uvs: &[[f32; 2]],
+        error: f64,
+        step: f64,
+        leaf: bool,
+    ) -> Result<BakedTexture, BuildError> {
+        let n = vertices.len();
+        // Which textures can be read.
+        let mut pyramids: FxHashMap<u32, Option<Arc<Pyramid>>> = FxHashMap::default();
+        for v in vertices {
+            if v.texture != NO_TEXTURE && !pyramids.contains_key(&v.texture) {
+                pyramids.insert(v.texture, self.pyramid(v.texture));
+            }
+        }
+        let textured = |v: &WorkVertex| {
+            v.texture != NO_TEXTURE && matches!(pyramids.get(&v.texture), Some(Some(_)))
+        };
+        // Charts: connected vertex sets of one texture.
+        let mut parent: Vec<u32> = (0..n as u32).collect();
+        for t in indices.chunks_exact(3) {
+            for k in 0..3 {
+                let (a, b) = (t[k], t[(k + 1) % 3]);
+                if vertices[a as usize].texture == vertices[b as usize].texture {
+                    let (ra, rb) = (find(&mut parent, a), find(&mut parent, b));
+                    if ra != rb {
+                        parent[ra.max(rb) as usize] = ra.min(rb);
+                    }
+                }
+            }
+        }
+        let roots: Vec<u32> = (0..n as u32).map(|i| find(&mut parent, i)).collect();
+        // Per chart: model area, texel area (level 0), UV bounds.
+        struct Chart {
+            texture: u32,
+            model_area: f64,
+            texel_area: f64,
+            umin: [f64; 2],
+            umax: [f64; 2],
+        }
+        let mut chart_of_root: FxHashMap<u32, usize> = FxHashMap::default();
+        let mut charts: Vec<Chart> = Vec::new();
+        let mut vertex_chart = vec![usize::MAX; n];
+        for i in 0..n {
+            if !textured(&vertices[i]) {
+                continue;
+            }
+            let c = *chart_of_root.entry(roots[i]).or_insert_with(|| {
+                charts.push(Chart {
+                    texture: vertices[i].texture,
+                    model_area: 0.0,
+                    texel_area: 0.0,
+                    umin: [f64::INFINITY; 2],
+                    umax: [f64::NEG_INFINITY; 2],
+                });
+                charts.len() - 1
+            });
+            vertex_chart[i] = c;
+            let mut grow = |uv: [f32; 2]| {
+                for a in 0..2 {
+                    charts[c].umin[a] = charts[c].umin[a].min(uv[a] as f64);
+                    charts[c].umax[a] = charts[c].umax[a].max(uv[a] as f64);
+                }
+            };
+            grow(vertices[i].uv);
+            if let Some(&t) = target_uvs.get(i) {
+                grow(t);
+            }
+        }
+        for t in indices.chunks_exact(3) {
+            let c = vertex_chart[t[0] as usize];
+            if c == usize::MAX
+                || vertex_chart[t[1] as usize] != c
+                || vertex_chart[t[2] as usize] != c
+            {
+                continue;
+            }
+            let t = [t[0], t[1], t[2]];
+            let p = t.map(|i| vertices[i as usize].q.map(|x| x as f64 * step));
+            let u = t.map(|i| vertices[i as usize].uv.map(f64::from));
+            let e1 = [p[1][0] - p[0][0], p[1][1] - p[0][1], p[1][2] - p[0][2]];
+            let e2 = [p[2][0] - p[0][0], p[2][1] - p[0][1], p[2][2] - p[0][2]];
+            let cr = [
+                e1[1] * e2[2] - e1[2] * e2[1],
+                e1[2] * e2[0] - e1[0] * e2[2],
+                e1[0] * e2[1] - e1[1] * e2[0],
+            ];
+            charts[c].model_area += 0.5 * (cr[0] * cr[0] + cr[1] * cr[1] + cr[2] * cr[2]).sqrt();
+            let size = pyramids[&charts[c].texture]
+                .as_ref()
+                .map(|p| (p.levels[0].w as f64, p.levels[0].h as f64))
+                .unwrap_or((1.0, 1.0));
+            let uvc = ((u[1][0] - u[0][0]) * (u[2][1] - u[0][1])
+                - (u[2][0] - u[0][0]) * (u[1][1] - u[0][1]))
+                .abs();
+            charts[c].texel_area += 0.5 * uvc * size.0 * size.1;
+        }
+        // The level each chart wants.
+        let wanted: Vec<usize> = charts
+            .iter()
+            .map(|c| {
+                if leaf || error <= 0.0 || c.texel_area <= 0.0 || c.model_area <= 0.0 {
+                    return 0;
+                }
+                let texel = (c.model_area / c.texel_area).sqrt();
+                let k = (error * TEXEL_PER_ERROR / texel).log2().floor();
+                if k.is_finite() && k > 0.0 {
+                    k as usize
+                } else {
+                    0
+                }
+            })
+            .collect();
+        // Solid colours of the untextured vertices.
+        let mut solid: FxHashMap<[u8; 4], usize> = FxHashMap::default();
+        let quantise = vertices.iter().filter(|v| !textured(v)).count() > MAX_SOLID_COLORS && {
+            let mut distinct = rustc_hash::FxHashSet::default();
+            vertices
+                .iter()
+                .filter(|v| !textured(v))
+                .any(|v| distinct.insert(v.color) && distinct.len() > MAX_SOLID_COLORS)
+        };
+        let solid_color = |c: [u8; 4]| {
+            if quantise {
+                c.map(|x| (x & 0xF0) | (x >> 4))
+            } else {
+                c
+            }
+        };
+        for v in vertices.iter().filter(|v| !textured(v)) {
+            let next = solid.len();
+            solid.entry(solid_color(v.color)).or_insert(next);
+        }
+        let mut extra_levels = 0usize;
+        let mut downsampled = false;
+        loop {
+            // Rectangles at this try's levels, merged where they overlap.
+            let mut rects: Vec<Rect> = Vec::new();
+            let mut rect_of_chart = vec![0usize; charts.len()];
+            for (ci, c) in charts.iter().enumerate() {
+                let p = pyramids[&c.texture].as_ref().expect("textured");
+                let level = (wanted[ci] + extra_levels).min(p.levels.len() - 1);
+                let l = &p.levels[level];
+                let src = &self.sources[c.texture as usize];
+                let (w, h) = (l.w as f64, l.h as f64);
+                let ys = |v: f64| if src.v_up { (1.0 - v) * h } else { v * h };
+                let (ya, yb) = (ys(c.umin[1]), ys(c.umax[1]));
+                rects.push(Rect {
+                    texture: c.texture,
+                    level,
+                    x0: (c.umin[0] * w).floor() as i64 - GUTTER,
+                    x1: (c.umax[0] * w).ceil() as i64 + GUTTER,
+                    y0: ya.min(yb).floor() as i64 - GUTTER,
+                    y1: ya.max(yb).ceil() as i64 + GUTTER,
+                    color: [0; 4],
+                    dx: 0,
+                    dy: 0,
+                });
+                rect_of_chart[ci] = rects.len() - 1;
+            }
+            merge_overlapping(&mut rects, &mut rect_of_chart);
+            let mut solids: Vec<([u8; 4], usize)> = solid.iter().map(|(c, i)| (*c, *i)).collect();
+            solids.sort_by_key(|s| s.1);
+            let solid_base = rects.len();
+            for (color, _) in &solids {
+                rects.push(Rect {
+                    texture: NO_TEXTURE,
+                    level: 0,
+                    x0: 0,
+                    y0: 0,
+                    x1: SOLID,
+                    y1: SOLID,
+                    color: *color,
+                    dx: 0,
+                    dy: 0,
+                });
+            }
+            if rects.len() > MAX_PATCH_CHARTS {
+                return Err(BuildError::Internal(format!(
+                    "a patch needs {} texture charts (at most {MAX_PATCH_CHARTS})",
+                    rects.len()
+                )));
+            }
+            let Some((aw, ah)) = pack(&mut rects) else {
+                // Too big: one level coarser for every chart.
+                let deepest = charts
+                    .iter()
+                    .enumerate()
+                    .map(|(ci, c)| {
+                        let p = pyramids[&c.texture].as_ref().expect("textured");
+                        (wanted[ci] + extra_levels) < p.levels.len() - 1
+                    })
+                    .any(|b| b);
+                if !deepest {
+                    return Err(BuildError::Internal(
+                        "patch texture does not fit even at 1 texel per chart".into(),
+                    ));
+                }
+                extra_levels += 1;
+                downsampled = true;
+                continue;
+            };
+            // Fill the texture.
+            let mut rgba = vec![0u8; (aw * ah * 4) as usize];
+            for r in &rects {
+                let put = |rgba: &mut [u8], x: i64, y: i64, px: [u8; 4]| {
+                    let o = ((y * aw + x) * 4) as usize;
+                    rgba[o..o + 4].copy_from_slice(&px);
+                };
+                if r.texture == NO_TEXTURE {
+                    for y in 0..r.h() {
+                        for x in 0..r.w() {
+                            put(&mut rgba, r.dx + x, r.dy + y, r.color);
+                        }
+                    }
+                    continue;
+                }
+                let src = &self.sources[r.texture as usize];
+                let l = &pyramids[&r.texture].as_ref().expect("textured").levels[r.level];
+                let tint = src.tint;
+                for y in 0..r.h() {
+                    let sy = wrap(r.y0 + y, l.h as i64, src.wrap[1]);
+                    for x in 0..r.w() {
+                        let sx = wrap(r.x0 + x, l.w as i64, src.wrap[0]);
+                        let o = ((sy * l.w as i64 + sx) * 4) as usize;
+                        let mut px = [l.rgba[o], l.rgba[o + 1], l.rgba[o + 2], l.rgba[o + 3]];
+                        if tint != [255; 4] {
+                            for c in 0..4 {
+                                px[c] = ((px[c] as u32 * tint[c] as u32 + 127) / 255) as u8;
+                            }
+                        }
+                        put(&mut rgba, r.dx + x, r.dy + y, px);
+                    }
+                }
+            }
+            // Chart maps: one per rectangle.
+            let (fw, fh) = (aw as f32, ah as f32);
+            let maps: Vec<TextureChart> = rects
+                .iter()
+                .map(|r| {
+                    if r.texture == NO_TEXTURE {
+                        return TextureChart {
+                            image: u32::MAX,
+                            scale: [0.0, 0.0],
+                            offset: [
+                                (r.dx as f32 + SOLID as f32 / 2.0) / fw,
+                                (r.dy as f32 + SOLID as f32 / 2.0) / fh,
+                            ],
+                        };
+                    }
+                    let l = &pyramids[&r.texture].as_ref().expect("textured").levels[r.level];
+                    let (w, h) = (l.w as f32, l.h as f32);
+                    let ox = (r.dx - r.x0) as f32;
+                    let oy = (r.dy - r.y0) as f32;
+                    if self.sources[r.texture as usize].v_up {
+                        TextureChart {
+                            image: r.texture,
+                            scale: [w / fw, -h / fh],
+                            offset: [ox / fw, (h + oy) / fh],
+                        }
+                    } else {
+                        TextureChart {
+                            image: r.texture,
+                            scale: [w / fw, h / fh],
+                            offset: [ox / fw, oy / fh],
+                        }
+                    }
+                })
+                .collect();
+            let chart_ids: Vec<u16> = (0..n)
+                .map(|i| {
+                    if vertex_chart[i] != usize::MAX {
+                        rect_of_chart[vertex_chart[i]] as u16
+                    } else {
+                        (solid_base + solid[&solid_color(vertices[i].color)]) as u16
+                    }
+                })
+                .collect();
+            let texture = PatchTexture::encode(
+                aw as u32,
+                ah as u32,
+                &rgba,
+                self.options.codec,
+                self.options.quality,
+            )?;
+            let texels = (aw * ah) as u64;
+            self.texels.fetch_add(texels, Ordering::Relaxed);
+            if leaf {
+                self.leaf_texels.fetch_add(texels, Ordering::Relaxed);
+            }
+            self.bytes
+                .fetch_add(texture.encoded.len() as u64, Ordering::Relaxed);
+            if let Ok(mut r) = self.report.lock() {
+                let images = rects.iter().filter(|r| r.texture != NO_TEXTURE).count();
+                if images == 0 {
+                    r.solid_only += 1;
+                } else if rects.len() == 1 {
+                    r.crops += 1;
+                } else {
+                    r.atlases += 1;
+                }
+                r.downsampled_to_fit += downsampled as u64;
+            }
+            return Ok(BakedTexture {
+                charts: maps,
+                chart_ids,
+                texture,
+            });
+        }
+    }
+}
+
+/// Texel coordinate `i` of an axis of `n` texels under `mode`.
+fn wrap(i: i64, n: i64, mode: Wrap) -> i64 {
+    match mode {
+        Wrap::Repeat => i.rem_euclid(n),
+        Wrap::ClampToEdge => i.clamp(0, n - 1),
+        Wrap::MirroredRepeat => {
+            let p = i.rem_euclid(2 * n);
+            if p < n {
+                p
+            } else {
+                2 * n - 1 - p
+            }
+        }
+    }
+}
+
+/// Merges rectangles of one image level that overlap into their bounding box, until
+/// none overlap; `rect_of_chart` follows. Charts that share texels share them once.
+fn merge_overlapping(rects: &mut Vec<Rect>, rect_of_chart: &mut [usize]) {
+    loop {
+        let mut merged_any = false;
+        let mut i = 0;
+        while i < rects.len() {
+            let mut j = i + 1;
+            while j < rects.len() {
+                if rects[i].overlaps(&rects[j]) {
+                    let o = rects.swap_remove(j);
+                    let r = &mut rects[i];
+                    r.x0 = r.x0.min(o.x0);
+                    r.y0 = r.y0.min(o.y0);
+                    r.x1 = r.x1.max(o.x1);
+                    r.y1 = r.y1.max(o.y1);
+                    let moved = rects.len(); // the old index of the rect now at j
+                    for c in rect_of_chart.iter_mut() {
+                        if *c == j {
+                            *c = i;
+                        } else if *c == moved {
+                            *c = j;
+                        }
+                    }
+                    merged_any = true;
+                } else {
+                    j += 1;
+                }
+            }
+            i += 1;
+        }
+        if !merged_any {
+            return;
+        }
+    }
+}
+
+/// Shelf packing, tallest first, into a texture about as wide as it is tall. Sets each
+/// rectangle's placement; the texture's size, or `None` past [`MAX_TEXTURE_DIM`].
+fn pack(rects: &mut [Rect]) -> Option<(i64, i64)> {
+    let max = MAX_TEXTURE_DIM as i64;
+    let area: i64 = rects.iter().map(|r| r.w() * r.h()).sum();
+    let widest = rects.iter().map(|r| r.w()).max().unwrap_or(1);
+    if widest > max || rects.iter().any(|r| r.h() > max) {
+        return None;
+    }
+    let width = (((area as f64) * 1.1).sqrt().ceil() as i64)
+        .max(widest)
+        .min(max);
+    let mut order: Vec<usize> = (0..rects.len()).collect();
+    order.sort_by_key(|&i| (-rects[i].h(), -rects[i].w()));
+    let (mut x, mut y, mut row_h, mut used_w) = (0i64, 0i64, 0i64, 0i64);
+    for i in order {
+        let r = &mut rects[i];
+        if x + r.w() > width {
+            y += row_h;
+            x = 0;
+            row_h = 0;
+        }
+        r.dx = x;
+        r.dy = y;
+        x += r.w();
+        used_w = used_w.max(x);
+        row_h = row_h.max(r.h());
+    }
+    let height = y + row_h;
+    (height <= max).then_some((used_w.max(1), height.max(1)))
+}
+
+/// Reads and decodes an image to RGBA8.
+fn read_image(src: &ImageSource) -> Result<(u32, u32, Vec<u8>), String> {
+    let bytes: Vec<u8> = match src {
+        ImageSource::File(p) => std::fs::read(p).map_err(|e| e.to_string())?,
+        ImageSource::FileRange { path, offset, len } => {
+            let mut f = std::fs::File::open(path).map_err(|e| e.to_string())?;
+            f.seek(SeekFrom::Start(*offset))
+                .map_err(|e| e.to_string())?;
+            let mut b = Vec::new();
+            f.take(*len)
+                .read_to_end(&mut b)
+                .map_err(|e| e.to_string())?;
+            if b.len() as u64 != *len {
+                return Err(format!("{} of {len} bytes", b.len()));
+            }
+            b
+        }
+        ImageSource::Memory { bytes, .. } => bytes.to_vec(),
+    };
+    let img = image::ImageReader::new(std::io::Cursor::new(&bytes[..]))
+        .with_guessed_format()
+        .map_err(|e| e.to_string())?
+        .decode()
+        .map_err(|e| e.to_string())?;
+    let (w, h) = (img.width(), img.height());
+    Ok((w, h, img.into_rgba8().into_raw()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rect(texture: u32, x0: i64, y0: i64, x1: i64, y1: i64) -> Rect {
+        Rect {
+            texture,
+            level: 0,
+            x0,
+            y0,
+            x1,
+            y1,
+            color: [0; 4],
+            dx: 0,
+            dy: 0,
+        }
+    }
+
+    #[test]
+    fn overlapping_rectangles_merge_and_charts_follow() {
+        let mut rects = vec![
+            rect(0, 0, 0, 10, 10),
+            rect(0, 50, 50, 60, 60),
+            rect(0, 5, 5, 20, 20),
+            rect(1, 0, 0, 10, 10),
+        ];
+        let mut of = vec![0, 1, 2, 3];
+        merge_overlapping(&mut rects, &mut of);
+        assert_eq!(rects.len(), 3);
+        assert_eq!(of[0], of[2]);
+        let r = &rects[of[0]];
+        assert_eq!((r.x0, r.y0, r.x1, r.y1), (0, 0, 20, 20));
+        assert_eq!(rects[of[1]].x0, 50);
+        assert_eq!(rects[of[3]].texture, 1);
+    }
+
+    #[test]
+    fn packing_places_rectangles_apart_within_the_texture() {
+        let mut rects: Vec<Rect> = (0..40)
+            .map(|i| rect(0, 0, 0, 3 + i % 7 * 5, 2 + i % 5 * 9))
+            .collect();
+        let (w, h) = pack(&mut rects).expect("fits");
+        for (i, a) in rects.iter().enumerate() {
+            assert!(a.dx >= 0 && a.dy >= 0 && a.dx + a.w() <= w && a.dy + a.h() <= h);
+            for b in &rects[i + 1..] {
+                let apart = a.dx + a.w() <= b.dx
+                    || b.dx + b.w() <= a.dx
+                    || a.dy + a.h() <= b.dy
+                    || b.dy + b.h() <= a.dy;
+                assert!(apart, "{a:?} overlaps {b:?}");
+            }
+        }
+        let area: i64 = rects.iter().map(|r| r.w() * r.h()).sum();
+        assert!(
+            (w * h) as f64 <= 2.0 * area as f64,
+            "{w}x{h} for {area} texels"
+        );
+        assert!(pack(&mut [rect(0, 0, 0, 5000, 4)]).is_none());
+    }
+
+    #[test]
+    fn wrap_modes() {
+        assert_eq!(wrap(-1, 4, Wrap::Repeat), 3);
+        assert_eq!(wrap(5, 4, Wrap::ClampToEdge), 3);
+        assert_eq!(wrap(4, 4, Wrap::MirroredRepeat), 3);
+        assert_eq!(wrap(-1, 4, Wrap::MirroredRepeat), 0);
+    }
+
+    #[test]
+    fn pyramid_levels_halve_and_average() {
+        let rgba: Vec<u8> = (0..5 * 3).flat_map(|i| [i as u8 * 10, 0, 0, 255]).collect();
+        let p = Pyramid::new(5, 3, rgba);
+        let sizes: Vec<(u32, u32)> = p.levels.iter().map(|l| (l.w, l.h)).collect();
+        assert_eq!(sizes, vec![(5, 3), (3, 2), (2, 1), (1, 1)]);
+        // Texel (0,0) of level 1 = mean of source texels 0, 1, 5, 6 (red 0, 10, 50, 60).
+        assert_eq!(p.levels[1].rgba[0], 30);
+    }
+}

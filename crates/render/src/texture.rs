@@ -1,0 +1,323 @@
+//! Patch textures on the GPU (models with `ATTR_TEXTURE`): one wgpu texture per
+//! resident patch, with a full mip chain made on the CPU at upload, sampled through
+//! bind group 1 of the textured pipeline.
+//!
+//! Format: `Rgba8Unorm`, not the sRGB variant. The texels are sRGB-encoded like vertex
+//! colours, and the untextured path treats vertex colours as plain values (Unorm8x4
+//! attributes, interpolated and lit as they are); sampling a Unorm texture gives the same
+//! values, so a textured patch looks exactly like the same colours given per vertex. The
+//! mips are box-filtered over the same plain values, as the rasteriser interpolates
+//! vertex colours.
+//!
+//! Everything here works on WebGL2 (wgpu's downlevel WebGL2 limits): 2D textures with
+//! mips (non-power-of-two sizes allowed in GL ES 3.0), a filtering sampler, one texture
+//! and one sampler binding. A texture larger than the device's limit (the format
+//! guarantees at most 4096, WebGL2's guaranteed minimum is 2048) starts at the first
+//! mip level that fits.
+
+/// Format of every patch texture (see the module docs for why not sRGB).
+pub const PATCH_TEXTURE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
+
+/// Number of levels of a full mip chain of a `width` x `height` texture (down to 1x1).
+pub fn mip_level_count(width: u32, height: u32) -> u32 {
+    32 - width.max(height).max(1).leading_zeros()
+}
+
+/// Size of mip `level` of a `width` x `height` texture.
+#[inline]
+fn level_size(width: u32, height: u32, level: u32) -> (u32, u32) {
+    ((width >> level).max(1), (height >> level).max(1))
+}
+
+/// The first mip level of a `width` x `height` texture whose size fits `max_dim`.
+fn first_level(width: u32, height: u32, max_dim: u32) -> u32 {
+    let max_dim = max_dim.max(1);
+    let mut l = 0;
+    while width.max(height) >> l > max_dim {
+        l += 1;
+    }
+    l
+}
+
+/// GPU bytes of a `width` x `height` RGBA8 patch texture with its mip chain (about 4/3 of
+/// `4 * width * height`), as uploaded to a device whose largest texture is `max_dim`
+/// texels (the levels above it are not uploaded). 0 when either size is 0 (no texture).
+pub fn texture_gpu_bytes(width: u32, height: u32, max_dim: u32) -> u64 {
+    if width == 0 || height == 0 {
+        return 0;
+    }
+    (first_level(width, height, max_dim)..mip_level_count(width, height))
+        .map(|l| {
+            let (w, h) = level_size(width, height, l);
+            4 * u64::from(w) * u64::from(h)
+        })
+        .sum()
+}
+
+/// Per destination texel along one axis (`n` source texels onto `m`): the first source
+/// texel and the weights of it and the following ones (the exact overlap of the
+/// destination texel's footprint with each source texel, summing to 1).
+fn axis_weights(n: u32, m: u32) -> Vec<(usize, Vec<f32>)> {
+    let s = f64::from(n) / f64::from(m);
+    (0..m)
+        .map(|x| {
+            let (a, b) = (f64::from(x) * s, f64::from(x + 1) * s);
+            let i0 = a.floor() as usize;
+            let i1 = (b.ceil() as usize).min(n as usize).max(i0 + 1);
+            let w = (i0..i1)
+                .map(|i| ((b.min(i as f64 + 1.0) - a.max(i as f64)) / s) as f32)
+                .collect();
+            (i0, w)
+        })
+        .collect()
+}
+
+/// The next mip level of `src` (`w` x `h` RGBA8, rows top to bottom): half the size
+/// (rounded down, at least 1), each texel the area-weighted mean of the source texels
+/// its footprint covers (a box filter; odd sizes weigh the shared texels by their
+/// overlap).
+pub fn downsample(src: &[u8], w: u32, h: u32) -> (Vec<u8>, u32, u32) {
+    let (dw, dh) = ((w / 2).max(1), (h / 2).max(1));
+    let xs = axis_weights(w, dw);
+    let ys = axis_weights(h, dh);
+    let row_bytes = 4 * w as usize;
+    let mut out = Vec::with_capacity(4 * dw as usize * dh as usize);
+    let mut acc = vec![0f32; 4 * dw as usize];
+    let mut filtered = vec![0f32; 4 * dw as usize];
+    for (y0, wy) in &ys {
+        acc.iter_mut().for_each(|a| *a = 0.0);
+        for (dy, &fy) in wy.iter().enumerate() {
+            let row = &src[(y0 + dy) * row_bytes..(y0 + dy + 1) * row_bytes];
+            for (d, (x0, wx)) in xs.iter().enumerate() {
+                let mut px = [0f32; 4];
+                for (dx, &fx) in wx.iter().enumerate() {
+                    let s = &row[4 * (x0 + dx)..4 * (x0 + dx) + 4];
+                    for c in 0..4 {
+                        px[c] += fx * f32::from(s[c]);
+                    }
+                }
+                filtered[4 * d..4 * d + 4].copy_from_slice(&px);
+            }
+            for (a, f) in acc.iter_mut().zip(&filtered) {
+                *a += fy * f;
+            }
+        }
+        out.extend(acc.iter().map(|&v| (v + 0.5).clamp(0.0, 255.0) as u8));
+    }
+    (out, dw, dh)
+}
+
+/// The bind group layout of a patch texture (group 1 of the textured pipeline): the
+/// texture at binding 0, its sampler at binding 1.
+pub fn texture_bind_group_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
+    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("tessera patch texture layout"),
+        entries: &[
+            wgpu::BindGroupLayoutEntry {
+                binding: 0,
+                visibility: wgpu::ShaderStages::FRAGMENT,
+                ty: wgpu::BindingType::Texture {
+                    sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                    view_dimension: wgpu::TextureViewDimension::D2,
+                    multisampled: false,
+                },
+                count: None,
+            },
+            wgpu::BindGroupLayoutEntry {
+                binding: 1,
+                visibility: wgpu::ShaderStages::FRAGMENT,
+                ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+                count: None,
+            },
+        ],
+    })
+}
+
+/// A patch texture as the GPU cache holds it (in its [`crate::Slot`]): the texture and
+/// the bind group the textured pipeline draws it with. Dropped (freed) with its slot.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct SlotTexture {
+    pub texture: wgpu::Texture,
+    pub bind_group: wgpu::BindGroup,
+    /// GPU bytes of the texture, mips included; 0 for the shared grey stand-in of a
+    /// textured patch that came without its texture.
+    pub bytes: u64,
+}
+
+/// What the GPU cache needs for textures, made at its first textured upload (models
+/// without textures never pay for it): the bind group layout, one sampler shared by
+/// every patch, and the 1x1 grey stand-in.
+pub(crate) struct TextureKit {
+    pub layout: wgpu::BindGroupLayout,
+    sampler: wgpu::Sampler,
+    grey: Option<SlotTexture>,
+}
+
+impl TextureKit {
+    pub fn new(device: &wgpu::Device, queue: &wgpu::Queue) -> TextureKit {
+        let layout = texture_bind_group_layout(device);
+        // Linear, trilinear between mips, clamped: the builder puts gutters around the
+        // charts, so a footprint that reaches past a chart's edge reads its own colours.
+        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("tessera patch texture sampler"),
+            address_mode_u: wgpu::AddressMode::ClampToEdge,
+            address_mode_v: wgpu::AddressMode::ClampToEdge,
+            address_mode_w: wgpu::AddressMode::ClampToEdge,
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            mipmap_filter: wgpu::MipmapFilterMode::Linear,
+            ..Default::default()
+        });
+        let mut kit = TextureKit {
+            layout,
+            sampler,
+            grey: None,
+        };
+        let mut grey = kit.upload(device, queue, 1, 1, &[128, 128, 128, 255], 1 << 14);
+        grey.bytes = 0;
+        kit.grey = Some(grey);
+        kit
+    }
+
+    /// The 1x1 grey stand-in for a textured patch that came without its texture
+    /// (shared: 0 bytes in the slots that use it).
+    pub fn grey(&self) -> SlotTexture {
+        self.grey.clone().expect("made with the kit")
+    }
+
+    fn create(device: &wgpu::Device, width: u32, height: u32, levels: u32) -> wgpu::Texture {
+        device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("tessera patch texture"),
+            size: wgpu::Extent3d {
+                width,
+                height,
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: levels,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: PATCH_TEXTURE_FORMAT,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+            view_formats: &[],
+        })
+    }
+
+    /// Uploads `rgba` (`width` x `height`, rows top to bottom, `4 * width * height`
+    /// bytes) with its mip chain, from the first level that fits `max_dim`.
+    pub fn upload(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        width: u32,
+        height: u32,
+        rgba: &[u8],
+        max_dim: u32,
+    ) -> SlotTexture {
+        let first = first_level(width, height, max_dim);
+        let levels = mip_level_count(width, height);
+        let (w0, h0) = level_size(width, height, first);
+        let texture = Self::create(device, w0, h0, levels - first);
+        let mut level: std::borrow::Cow<[u8]> = std::borrow::Cow::Borrowed(rgba);
+        let (mut w, mut h) = (width, height);
+        let mut bytes = 0;
+        for l in 0..levels {
+            if l > 0 {
+                let (next, nw, nh) = downsample(&level, w, h);
+                (level, w, h) = (std::borrow::Cow::Owned(next), nw, nh);
+            }
+            if l < first {
+                continue;
+            }
+            queue.write_texture(
+                wgpu::TexelCopyTextureInfo {
+                    texture: &texture,
+                    mip_level: l - first,
+                    origin: wgpu::Origin3d::ZERO,
+                    aspect: wgpu::TextureAspect::All,
+                },
+                &level,
+                wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(4 * w),
+                    rows_per_image: Some(h),
+                },
+                wgpu::Extent3d {
+                    width: w,
+                    height: h,
+                    depth_or_array_layers: 1,
+                },
+            );
+            bytes += 4 * u64::from(w) * u64::from(h);
+        }
+        let view = texture.create_view(&wgpu::TextureViewDescriptor {
+            label: Some("tessera patch texture view"),
+            ..Default::default()
+        });
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("tessera patch texture bind group"),
+            layout: &self.layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::TextureView(&view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::Sampler(&self.sampler),
+                },
+            ],
+        });
+        SlotTexture {
+            texture,
+            bind_group,
+            bytes,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn mip_chain_bytes() {
+        assert_eq!(mip_level_count(1, 1), 1);
+        assert_eq!(mip_level_count(64, 64), 7);
+        assert_eq!(mip_level_count(5, 3), 3);
+        assert_eq!(texture_gpu_bytes(64, 64, 4096), 4 * 5461);
+        // 5x3 -> 2x1 -> 1x1.
+        assert_eq!(texture_gpu_bytes(5, 3, 4096), 4 * (15 + 2 + 1));
+        // A device whose largest texture is 32 starts at level 1.
+        assert_eq!(texture_gpu_bytes(64, 64, 32), 4 * (5461 - 4096));
+        assert_eq!(texture_gpu_bytes(0, 7, 4096), 0);
+        // About 4/3 of the base level.
+        let b = texture_gpu_bytes(1000, 600, 4096) as f64 / (4.0 * 1000.0 * 600.0);
+        assert!((b - 4.0 / 3.0).abs() < 0.01, "{b}");
+    }
+
+    #[test]
+    fn box_filter_keeps_means() {
+        // 2x2 -> 1x1: the mean.
+        let src = [
+            0, 0, 0, 255, 100, 0, 0, 255, 0, 200, 0, 255, 100, 200, 40, 255,
+        ];
+        let (d, w, h) = downsample(&src, 2, 2);
+        assert_eq!((w, h), (1, 1));
+        assert_eq!(d, vec![50, 100, 10, 255]);
+        // 3x1 -> 1x1: every texel weighs a third.
+        let src = [30, 0, 0, 0, 60, 0, 0, 0, 90, 0, 0, 0];
+        let (d, w, h) = downsample(&src, 3, 1);
+        assert_eq!((w, h), (1, 1));
+        assert_eq!(d, vec![60, 0, 0, 0]);
+        // 5x1 -> 2x1: 2.5 texels each, the middle one shared.
+        let src: Vec<u8> = [10u8, 20, 30, 40, 50]
+            .iter()
+            .flat_map(|&v| [v, v, v, v])
+            .collect();
+        let (d, w, _) = downsample(&src, 5, 1);
+        assert_eq!(w, 2);
+        // (10 + 20) * 0.4 + 30 * 0.2 and 30 * 0.2 + (40 + 50) * 0.4.
+        assert_eq!(d[0], 18);
+        assert_eq!(d[4], 42);
+    }
+}
