@@ -142,7 +142,7 @@ impl Ctx<'_> {
                     } else {
                         tessera_mesh::Vertex::default().color
                     },
-                    uv: s.uv,
+                    uv: tessera_format::stored_uv(s.uv),
                     texture: if self.baker.is_some() {
                         s.texture
                     } else {

@@ -349,12 +349,8 @@ pub fn encode_patch(patch: &PatchData, attributes: u32, quant_min: [u32; 3]) -> 
             sections[SEC_COLORS] = encode_vertices(&patch.colors);
         }
         if attributes & ATTR_UVS != 0 {
-            let bits: Vec<[u32; 2]> = patch
-                .uvs
-                .iter()
-                .map(|uv| [uv[0].to_bits(), uv[1].to_bits()])
-                .collect();
-            sections[SEC_UVS] = encode_vertices(&bits);
+            let codes: Vec<[u32; 2]> = patch.uvs.iter().map(|uv| uv_code(*uv)).collect();
+            sections[SEC_UVS] = encode_vertices(&codes);
         }
         if !patch.morph_targets.is_empty() {
             sections[SEC_MORPH] = encode_morph(&patch.positions, &patch.morph_targets);
@@ -452,6 +448,30 @@ fn zstd_decompress(stored: &[u8], capacity: usize) -> std::io::Result<Vec<u8>> {
 fn encode_vertices<T>(v: &[T]) -> Vec<u8> {
     meshopt::encode_vertex_buffer_level(v, VERTEX_CODEC_LEVEL, Some(VERTEX_CODEC_VERSION))
         .expect("meshopt vertex encoder")
+}
+
+/// Texture coordinates are stored on a grid of `2^-UV_FRACTION_BITS` (a 256th of a
+/// texel of a 4096-texel image): integers through the vertex codec take about half the
+/// bytes of raw f32 bits. Within +-2048 (wider UVs are clamped there).
+pub const UV_FRACTION_BITS: u32 = 20;
+const UV_LIMIT: f64 = 2048.0;
+
+/// The stored code of a texture coordinate pair: zigzag of `round(uv * 2^20)`.
+fn uv_code(uv: [f32; 2]) -> [u32; 2] {
+    uv.map(|c| {
+        let q = (c as f64).clamp(-UV_LIMIT, UV_LIMIT) * f64::from(1u32 << UV_FRACTION_BITS);
+        zigzag(q.round().clamp(i32::MIN as f64, i32::MAX as f64) as i32)
+    })
+}
+
+fn uv_from_code(c: [u32; 2]) -> [f32; 2] {
+    c.map(|z| (unzigzag(z) as f64 / f64::from(1u32 << UV_FRACTION_BITS)) as f32)
+}
+
+/// `uv` as a patch stores it (the builder snaps UVs first, so the texture it cuts and the
+/// UVs a reader decodes agree exactly).
+pub fn stored_uv(uv: [f32; 2]) -> [f32; 2] {
+    uv_from_code(uv_code(uv))
 }
 
 fn zigzag(v: i32) -> u32 {
@@ -697,11 +717,8 @@ pub fn decode_patch_with(
         patch.colors = decode_vertices(secs[SEC_COLORS], nu, "colors")?;
     }
     if attributes & ATTR_UVS != 0 {
-        let bits: Vec<[u32; 2]> = decode_vertices(secs[SEC_UVS], nu, "uvs")?;
-        patch.uvs = bits
-            .iter()
-            .map(|b| [f32::from_bits(b[0]), f32::from_bits(b[1])])
-            .collect();
+        let codes: Vec<[u32; 2]> = decode_vertices(secs[SEC_UVS], nu, "uvs")?;
+        patch.uvs = codes.iter().map(|c| uv_from_code(*c)).collect();
     }
     if morph {
         patch.morph_targets = decode_morph(secs[SEC_MORPH], &positions)?;
