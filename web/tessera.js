@@ -406,11 +406,14 @@ export const Tessera = {
    * quarter decoded patches), camera (docs/camera.md; default the home view),
    * autoResize (default true: the canvas follows its CSS size times devicePixelRatio;
    * false keeps canvas.width x canvas.height), prefixBytes (bytes of the first range
-   * request, default 64 KiB: the header and the top of the index of most models).
+   * request, default 64 KiB: the header and the top of the index of most models),
+   * maxTextureDim (default null: the device's own; a number makes the device's largest
+   * texture that, at least the canvas's size, as on a smaller GPU: textured models'
+   * larger patch textures are then uploaded from their first mip that fits).
    */
   async view(
     canvas,
-    { url, tolerancePx = 1, memoryBytes = 512 * 1048576, camera = null, autoResize = true, prefixBytes = 65536 } = {},
+    { url, tolerancePx = 1, memoryBytes = 512 * 1048576, camera = null, autoResize = true, prefixBytes = 65536, maxTextureDim = null } = {},
   ) {
     if (!url) throw new Error('Tessera.view: no model URL given');
     if (!hasWebGL2()) {
@@ -429,6 +432,7 @@ export const Tessera = {
       tolerancePx,
       memoryBytes,
       prefixBytes,
+      maxTextureDim,
       camera: camera == null ? null : typeof camera === 'string' ? JSON.parse(camera) : camera,
     });
     const viewer = await Viewer.open(canvas, abs, options);

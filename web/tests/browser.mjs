@@ -8,7 +8,8 @@
 // "error", "screenshot": "out.png" (optional, the canvas), "timeout_ms", "viewport":
 // [w, h]}]}. RESULTS: [{"name", "outcome": "idle" | "error" | "timeout", "ms" (from
 // navigation to the outcome), "error" (the page's message), "notice" (the page's notice
-// of a problem that does not stop the view, window.tesseraNotice), "stats" (the
+// of a problem that does not stop the view, window.tesseraNotice), "hud" (the text of
+// index.html's HUD, or null), "stats" (the
 // viewer's last frame statistics), "interaction" (with "drag": [dx, dy] in the visit: the cameras
 // before and after a drag and a wheel step, ms to idle again, the address's hash),
 // "console" (messages and page errors), "shot" (with "api_shot": PATH: the view's
@@ -293,6 +294,11 @@ for (const visit of plan.visits) {
       })(),
       stats: window.tesseraStats || null,
       notice: window.tesseraNotice || null,
+      // The page's HUD text (index.html), or null.
+      hud: (() => {
+        const e = document.getElementById('hud-text');
+        return e ? e.textContent : null;
+      })(),
     }))
     .catch(() => ({}));
   // Optional: touch gestures (CDP Input.dispatchTouchEvent: Chromium turns them into

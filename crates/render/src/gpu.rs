@@ -55,6 +55,18 @@ impl Gpu {
         instance: wgpu::Instance,
         surface: Option<&wgpu::Surface<'_>>,
     ) -> Result<Gpu, RenderError> {
+        Self::with_instance_limited_async(instance, surface, None).await
+    }
+
+    /// [`Gpu::with_instance_async`] with the device's largest 2D texture lowered to
+    /// `max_texture_dim` where given (to see a textured model as on a device with a
+    /// smaller limit: the GPU cache uploads a larger patch texture from its first mip
+    /// that fits).
+    pub async fn with_instance_limited_async(
+        instance: wgpu::Instance,
+        surface: Option<&wgpu::Surface<'_>>,
+        max_texture_dim: Option<u32>,
+    ) -> Result<Gpu, RenderError> {
         let adapter = wgpu::util::initialize_adapter_from_env_or_default(&instance, surface)
             .await
             .map_err(|e| RenderError::NoAdapter(e.to_string()))?;
@@ -76,6 +88,13 @@ impl Gpu {
             ..base
         }
         .using_resolution(alimits.clone());
+        let limits = wgpu::Limits {
+            max_texture_dimension_2d: max_texture_dim
+                .map_or(limits.max_texture_dimension_2d, |d| {
+                    d.min(limits.max_texture_dimension_2d)
+                }),
+            ..limits
+        };
         // Lines for the wireframe overlay, where the adapter has them.
         let features = adapter.features() & wgpu::Features::POLYGON_MODE_LINE;
         let (device, queue) = adapter

@@ -14,11 +14,13 @@ use std::sync::Arc;
 
 use glam::DVec3;
 use serde_json::{json, Value};
-use tessera_format::{Grid, ModelIndex, ATTR_COLORS};
+use tessera_format::{Grid, ModelIndex, PatchData, ATTR_COLORS, ATTR_TEXTURE};
 use tessera_nav::{Aabb, Navigator};
 use tessera_render::{clip_planes_along, FrameParams, Gpu, GpuCache, GpuStore, Renderer, Shading};
 use tessera_select::Camera;
-use tessera_stream::{Answer, FrameStats, PatchSource, Scheduler, SchedulerOptions};
+use tessera_stream::{
+    Answer, FrameStats, PatchSource, ResidentStore, Scheduler, SchedulerOptions, StoreError,
+};
 use wasm_bindgen::prelude::*;
 use wasm_bindgen_futures::spawn_local;
 
@@ -168,6 +170,71 @@ impl PatchSource for Remote {
     }
 }
 
+/// Main-thread time of uploads into the GPU cache (textured patches: the mip chain
+/// made on the CPU, in wasm, and the texture copies), for the frame statistics.
+#[derive(Clone, Copy, Debug, Default)]
+struct UploadTimes {
+    uploads: u64,
+    textured: u64,
+    ms: f64,
+    textured_ms: f64,
+    max_ms: f64,
+}
+
+/// The GPU cache's store with its uploads timed ([`UploadTimes`]).
+struct TimedStore<'a> {
+    inner: GpuStore<'a>,
+    times: &'a mut UploadTimes,
+}
+
+impl ResidentStore for TimedStore<'_> {
+    fn bytes_for(&self, patch: &PatchData) -> u64 {
+        self.inner.bytes_for(patch)
+    }
+    fn estimate_bytes(&self, vertices: u32, triangles: u32) -> u64 {
+        self.inner.estimate_bytes(vertices, triangles)
+    }
+    fn estimate_texture_bytes(&self, size: [u16; 2]) -> u64 {
+        self.inner.estimate_texture_bytes(size)
+    }
+    fn has_room(&self, patches: &[&PatchData]) -> bool {
+        self.inner.has_room(patches)
+    }
+    fn upload(&mut self, node: u32, patch: &PatchData) -> Result<u64, StoreError> {
+        self.upload_in_group(node, patch, &[])
+    }
+    fn upload_in_group(
+        &mut self,
+        node: u32,
+        patch: &PatchData,
+        siblings: &[&PatchData],
+    ) -> Result<u64, StoreError> {
+        let t0 = now_ms();
+        let r = self.inner.upload_in_group(node, patch, siblings);
+        if r.is_ok() {
+            let ms = now_ms() - t0;
+            let t = &mut *self.times;
+            t.uploads += 1;
+            t.ms += ms;
+            t.max_ms = t.max_ms.max(ms);
+            if patch.texture.is_some() {
+                t.textured += 1;
+                t.textured_ms += ms;
+            }
+        }
+        r
+    }
+    fn evict(&mut self, node: u32) {
+        self.inner.evict(node);
+    }
+    fn resident_bytes(&self) -> u64 {
+        self.inner.resident_bytes()
+    }
+    fn flush(&mut self) {
+        self.inner.flush();
+    }
+}
+
 /// What a depth pick (the point drawn under a pixel) is for.
 #[derive(Clone, Copy, Debug)]
 enum Purpose {
@@ -217,6 +284,9 @@ pub struct Viewer {
     nav: Navigator,
     quant_step: f64,
     has_colors: bool,
+    /// The model has patch textures (`ATTR_TEXTURE`).
+    textured: bool,
+    uploads: UploadTimes,
     last_ms: Option<f64>,
     stats: FrameStats,
     converged: bool,
@@ -281,7 +351,9 @@ impl Viewer {
     /// the GPU cache, a quarter for decoded patches, as `tessera render --memory`),
     /// `camera` (a camera of docs/camera.md; default the home view framed by the roots),
     /// `prefixBytes` (bytes of the first request, default 64 KiB: the header and the
-    /// top of the index of most models; what it lacks is fetched after).
+    /// top of the index of most models; what it lacks is fetched after),
+    /// `maxTextureDim` (default: the adapter's; lower makes a device whose largest
+    /// texture is that, as a smaller GPU's, at least the canvas's size).
     /// Errors carry a message meant for the page.
     pub async fn open(
         canvas: web_sys::HtmlCanvasElement,
@@ -300,6 +372,10 @@ impl Viewer {
             Value::Null => None,
             v => Some(Camera::from_json_value(v).map_err(|e| err(format!("camera: {e}")))?),
         };
+        let max_texture_dim = opts["maxTextureDim"]
+            .as_f64()
+            .filter(|d| d.is_finite() && *d >= 1.0)
+            .map(|d| d as u32);
         let (w, h) = (canvas.width().max(1), canvas.height().max(1));
 
         // The device: WebGL2 (see ARCHITECTURE.md for why not WebGPU).
@@ -315,9 +391,14 @@ impl Viewer {
         let surface = instance
             .create_surface(wgpu::SurfaceTarget::Canvas(canvas))
             .map_err(|e| no_webgl(&e))?;
-        let gpu = Gpu::with_instance_async(instance, Some(&surface))
-            .await
-            .map_err(|e| no_webgl(&e))?;
+        // `maxTextureDim`: never below the canvas's size.
+        let gpu = Gpu::with_instance_limited_async(
+            instance,
+            Some(&surface),
+            max_texture_dim.map(|d| d.max(w).max(h)),
+        )
+        .await
+        .map_err(|e| no_webgl(&e))?;
         let caps = surface.get_capabilities(&gpu.adapter);
         // The frame is shown as the patch shader writes it (no sRGB encoding), as the
         // native PNGs store it.
@@ -437,6 +518,11 @@ impl Viewer {
         renderer.has_colors = has_colors;
         let mut cache = GpuCache::new(&gpu.device, memory / 2);
         cache.set_levels(0, index.nodes().iter().map(|n| n.level).collect());
+        // Textured models (format version 3, a texture per patch): uploaded with their
+        // textures (mips made at upload, from the first level that fits the device's
+        // largest texture) and drawn through the textured pipeline, as the desktop.
+        let textured = index.header().attributes & ATTR_TEXTURE != 0;
+        cache.set_textured(0, textured);
         let mut scheduler = Scheduler::new(
             &index,
             SchedulerOptions {
@@ -455,13 +541,17 @@ impl Viewer {
             roots,
         };
         let quant_step = grid.step();
+        let mut uploads = UploadTimes::default();
         {
-            let mut store = GpuStore {
-                cache: &mut cache,
-                device: &gpu.device,
-                queue: &gpu.queue,
-                quant_step,
-                model: 0,
+            let mut store = TimedStore {
+                inner: GpuStore {
+                    cache: &mut cache,
+                    device: &gpu.device,
+                    queue: &gpu.queue,
+                    quant_step,
+                    model: 0,
+                },
+                times: &mut uploads,
             };
             scheduler.load_roots(&mut source, &mut store);
         }
@@ -484,6 +574,8 @@ impl Viewer {
             nav,
             quant_step,
             has_colors,
+            textured,
+            uploads,
             last_ms: None,
             stats: FrameStats::default(),
             converged: false,
@@ -527,12 +619,15 @@ impl Viewer {
                 let ix = Arc::new(ix);
                 self.cache
                     .set_levels(0, ix.nodes().iter().map(|n| n.level).collect());
-                let mut store = GpuStore {
-                    cache: &mut self.cache,
-                    device: &self.gpu.device,
-                    queue: &self.gpu.queue,
-                    quant_step: self.quant_step,
-                    model: 0,
+                let mut store = TimedStore {
+                    inner: GpuStore {
+                        cache: &mut self.cache,
+                        device: &self.gpu.device,
+                        queue: &self.gpu.queue,
+                        quant_step: self.quant_step,
+                        model: 0,
+                    },
+                    times: &mut self.uploads,
                 };
                 self.scheduler.set_index(&ix, &mut store);
                 self.source.fetcher.borrow_mut().set_index(ix.clone());
@@ -551,12 +646,15 @@ impl Viewer {
         let mut drew = false;
         if !idle {
             let camera = self.nav.camera();
-            let mut store = GpuStore {
-                cache: &mut self.cache,
-                device: &self.gpu.device,
-                queue: &self.gpu.queue,
-                quant_step: self.quant_step,
-                model: 0,
+            let mut store = TimedStore {
+                inner: GpuStore {
+                    cache: &mut self.cache,
+                    device: &self.gpu.device,
+                    queue: &self.gpu.queue,
+                    quant_step: self.quant_step,
+                    model: 0,
+                },
+                times: &mut self.uploads,
             };
             self.stats = self
                 .scheduler
@@ -603,6 +701,22 @@ impl Viewer {
         }
         let f = fetch.stats();
         let s = &self.stats;
+        let u = self.uploads;
+        // The drawn patch with the largest texture: its size in the file and as
+        // uploaded (from the first mip that fits the device's largest texture).
+        let largest_texture = self
+            .scheduler
+            .draw()
+            .iter()
+            .filter_map(|&n| {
+                let t = &self.cache.slot(n)?.texture.as_ref()?.texture;
+                let stored = self.index.nodes().get(n as usize)?.texture_size;
+                Some((n, stored, [t.width(), t.height()]))
+            })
+            .max_by_key(|&(n, stored, _)| (stored[0].max(stored[1]), std::cmp::Reverse(n)))
+            .map(
+                |(n, stored, uploaded)| json!({"node": n, "stored": stored, "uploaded": uploaded}),
+            );
         Ok(json!({
             "idle": converged,
             // Whether this call drew the canvas (a screenshot reads it right after).
@@ -621,13 +735,31 @@ impl Viewer {
             "failed_patches": s.failed_patches,
             "index_nodes": self.index.nodes().len(),
             "model_nodes": self.index.header().node_count,
+            // GPU bytes of the resident patches, their textures (mips included) in
+            // them, and the textures' part.
             "gpu_bytes": s.gpu_resident_bytes,
             "gpu_budget_bytes": s.gpu_budget_bytes,
+            "gpu_texture_bytes": self.cache.stats().texture_bytes,
+            "textured": self.textured,
+            // The device's largest 2D texture: larger patch textures are uploaded from
+            // their first mip that fits.
+            "max_texture_dim": self.gpu.device.limits().max_texture_dimension_2d,
+            "adapter_max_texture_dim": self.gpu.adapter.limits().max_texture_dimension_2d,
+            // {"node", "stored": [w, h], "uploaded": [w, h]} or null (no texture drawn).
+            "largest_texture": largest_texture,
             "ram_bytes": s.ram_resident_bytes,
             "selection_ms": s.selection_ms,
             "decoded": f.decoded,
             "decode_ms_mean": if f.decoded > 0 { f.decode_ms / f.decoded as f64 } else { 0.0 },
             "decode_ms_max": f.decode_max_ms,
+            "decode_ms_total": f.decode_ms,
+            // Uploads into the GPU cache (main thread): textured patches make their
+            // mip chain on the CPU there.
+            "uploads": u.uploads,
+            "upload_ms_total": u.ms,
+            "upload_ms_max": u.max_ms,
+            "textured_uploads": u.textured,
+            "textured_upload_ms_mean": if u.textured > 0 { u.textured_ms / u.textured as f64 } else { 0.0 },
             "first_frame_ms": self.first_frame_ms,
             "converged_ms": self.converged_ms,
             "adapter": self.gpu.adapter_label,
