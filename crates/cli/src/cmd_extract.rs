@@ -4,10 +4,12 @@
 //! errors, `tessera_select::select_cut`), or is the uniform cut at one level. The selected
 //! patches are decoded and merged into one indexed mesh by welding bit-identical vertices
 //! (`tessera_select::extract_nodes`: positions share one global grid, so border vertices
-//! shared by two patches are identical), and written as a binary PLY in model coordinates
-//! (`tessera_select::write_cut_ply`). The edge report of the written mesh (boundary and
-//! non-manifold edges) is printed: on a closed input any cut must be a closed manifold, so
-//! this doubles as the crack check.
+//! shared by two patches are identical), and written in model coordinates as a binary PLY
+//! (`tessera_select::write_cut_ply`) or as glTF 2.0 (`.glb`, or `.gltf` with its buffer
+//! embedded; `tessera_select::write_cut_gltf`): the extension of `-o` decides. A textured
+//! model's glTF keeps one primitive per patch with that patch's texture. The edge report
+//! of the welded mesh (boundary and non-manifold edges) is printed: on a closed input any
+//! cut must be a closed manifold, so this doubles as the crack check.
 //!
 //! MODEL is a path or an `http://` URL (`crate::open`): a remote model fetches only the
 //! patches of the cut, adjacent ones coalesced into one range request, and the output is
@@ -15,14 +17,59 @@
 
 use anyhow::{bail, Context};
 use serde_json::json;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-use tessera_format::{Grid, PatchReader};
+use tessera_format::{Grid, PatchReader, ATTR_TEXTURE};
 use tessera_select::{
-    extract_nodes, select_cut, uniform_level_cut, write_cut_ply, Camera, Criterion,
+    extract_nodes, extract_nodes_keeping, select_cut, uniform_level_cut, write_cut_gltf,
+    write_cut_ply, Camera, Criterion, GltfContainer, GltfContent,
 };
 
+/// The output formats, for `--help`.
+const OUTPUT_HELP: &str = "\
+Output formats (chosen by the extension of -o):
+  .ply   Binary PLY: the welded cut, positions in model coordinates, normals, colours
+         (RGBA bytes) and the source texture coordinates where the model has them.
+  .glb   glTF 2.0 binary, one file (MeshLab, Blender, glTF viewers). Positions in model
+         coordinates (f32), normals, indices (u32). Untextured model: one primitive, the
+         same welded mesh as the PLY, with COLOR_0 (linear RGBA floats) when the model has
+         colours. Textured model: one primitive and one material per patch, its
+         baseColorTexture that patch's texture (PNG, lossless; clamp to edge, linear
+         filtering) and TEXCOORD_0 the coordinates in it; no vertex colours.
+  .gltf  The same document as JSON text with the buffer (images included) embedded as a
+         base64 data: URI: one self-contained file, about a third larger than the .glb.
+Either glTF can be built again with `tessera build` (each patch texture becomes a source
+image). Files are written atomically: nothing appears at the path unless it was all
+written.";
+
+/// What `-o` asks for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Output {
+    Ply,
+    Gltf(GltfContainer),
+}
+
+impl Output {
+    fn of_path(path: &Path) -> anyhow::Result<Output> {
+        if let Some(c) = GltfContainer::of_path(path) {
+            return Ok(Output::Gltf(c));
+        }
+        match path.extension().and_then(|e| e.to_str()) {
+            Some(e) if e.eq_ignore_ascii_case("ply") => Ok(Output::Ply),
+            Some(e) => bail!(
+                "{}: cannot write .{e} files: name the output .ply, .glb or .gltf",
+                path.display()
+            ),
+            None => bail!(
+                "{}: the output needs an extension that names its format: .ply, .glb or .gltf",
+                path.display()
+            ),
+        }
+    }
+}
+
 #[derive(clap::Args)]
+#[command(after_help = OUTPUT_HELP)]
 #[command(group(
     clap::ArgGroup::new("criterion")
         .required(true)
@@ -51,8 +98,9 @@ pub struct Args {
     /// (see `tessera info`).
     #[arg(long, value_name = "L")]
     level: Option<u32>,
-    /// Output mesh (binary PLY), written atomically.
-    #[arg(short, long, value_name = "CUT.ply")]
+    /// Output mesh: .ply (binary PLY), .glb (binary glTF) or .gltf (glTF, embedded
+    /// buffer); written atomically. See the formats below.
+    #[arg(short, long, value_name = "CUT.ply|CUT.glb|CUT.gltf")]
     output: PathBuf,
     /// Print the summary as JSON on stdout.
     #[arg(long)]
@@ -116,24 +164,72 @@ fn model_name(model: &std::path::Path) -> String {
     s.rsplit(['/', '\\']).next().unwrap_or_default().to_string()
 }
 
+/// Fails early, before any patch is read, when the output's directory does not exist.
+fn check_output_dir(out: &Path) -> anyhow::Result<()> {
+    let dir = match out.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => return Ok(()),
+    };
+    if !dir.is_dir() {
+        bail!(
+            "cannot write {}: directory {} does not exist",
+            out.display(),
+            dir.display()
+        );
+    }
+    Ok(())
+}
+
 pub fn run(a: Args) -> anyhow::Result<ExitCode> {
+    let output = Output::of_path(&a.output)?;
+    check_output_dir(&a.output)?;
     let m = crate::open::open_model(&a.model).with_context(|| format!("{}", a.model.display()))?;
     let m = m.as_ref();
     let (nodes, criterion) = select(m, &a)?;
+    let grid = Grid::of_header(m.index().header());
+    let textured = m.index().header().attributes & ATTR_TEXTURE != 0;
+    // The file name only: local and remote extracts of one model are the same bytes.
+    let title = format!("tessera extract of {}", model_name(&a.model));
+    let cut_line = |n: usize| format!("cut {criterion}, {n} nodes");
+    let writing = || format!("writing {}", a.output.display());
     // The format error names the node ("patch checksum mismatch for node 12 ...").
-    let x = extract_nodes(m, &nodes).with_context(|| format!("{}", a.model.display()))?;
-    let comments = vec![
-        // The file name only: local and remote extracts of one model are the same bytes.
-        format!("tessera extract of {}", model_name(&a.model)),
-        format!("cut {criterion}, {} nodes", x.nodes.len()),
-    ];
-    write_cut_ply(
-        &Grid::of_header(m.index().header()),
-        &x.mesh,
-        &a.output,
-        comments,
-    )
-    .with_context(|| format!("writing {}", a.output.display()))?;
+    let in_model = || format!("{}", a.model.display());
+    let (x, gltf) = match output {
+        Output::Ply => {
+            let x = extract_nodes(m, &nodes).with_context(in_model)?;
+            let comments = vec![title, cut_line(x.nodes.len())];
+            write_cut_ply(&grid, &x.mesh, &a.output, comments).with_context(writing)?;
+            (x, None)
+        }
+        Output::Gltf(container) => {
+            let name = format!("{title}, {}", cut_line(nodes.len()));
+            if textured {
+                let (x, patches) = extract_nodes_keeping(m, &nodes).with_context(in_model)?;
+                let refs: Vec<(u32, &tessera_format::PatchData)> =
+                    x.nodes.iter().copied().zip(&patches).collect();
+                let s = write_cut_gltf(
+                    &grid,
+                    GltfContent::Textured(&refs),
+                    &a.output,
+                    container,
+                    &name,
+                )
+                .with_context(writing)?;
+                (x, Some(s))
+            } else {
+                let x = extract_nodes(m, &nodes).with_context(in_model)?;
+                let s = write_cut_gltf(
+                    &grid,
+                    GltfContent::Welded(&x.mesh),
+                    &a.output,
+                    container,
+                    &name,
+                )
+                .with_context(writing)?;
+                (x, Some(s))
+            }
+        }
+    };
 
     let max_node_error = x.max_node_error(m);
     let levels = x.level_range(m);
@@ -155,6 +251,17 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
                 "degenerate_triangles": e.degenerate_triangles,
             },
             "closed_manifold": e.is_closed_manifold(),
+            "format": match output {
+                Output::Ply => "ply",
+                Output::Gltf(GltfContainer::Binary) => "glb",
+                Output::Gltf(GltfContainer::Embedded) => "gltf",
+            },
+            "gltf": gltf.as_ref().map(|s| json!({
+                "bytes": s.bytes,
+                "primitives": s.primitives,
+                "textures": s.textures,
+                "texture_bytes": s.texture_bytes,
+            })),
         });
         println!("{}", serde_json::to_string_pretty(&j)?);
     } else {
@@ -184,6 +291,12 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
                 ""
             }
         );
+        if let Some(s) = &gltf {
+            println!(
+                "  glTF       {} bytes, {} primitives, {} patch textures ({} bytes of PNG)",
+                s.bytes, s.primitives, s.textures, s.texture_bytes
+            );
+        }
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -37,7 +37,7 @@ enum Command {
     Info(cmd_info::Args),
     /// Check everything checkable in a model; exit 0 only if it is valid.
     Verify(cmd_verify::Args),
-    /// Select a cut of the hierarchy and write it as one mesh (PLY).
+    /// Select a cut of the hierarchy and write it as one mesh (PLY, glTF or GLB).
     Extract(cmd_extract::Args),
     /// Generate deterministic test meshes (binary PLY).
     Gen(cmd_gen::Args),

@@ -6,7 +6,7 @@
 //! crate's checked decoder, merged by welding bit-identical vertices
 //! ([`merge_patches`]), and the edge report ([`edge_report`]) of the result is the crack
 //! check: on a closed input any cut must be a closed manifold. [`write_cut_ply`] writes
-//! it as a binary PLY in model coordinates.
+//! it as a binary PLY in model coordinates; [`crate::gltf_write`] writes it as glTF.
 
 use rayon::prelude::*;
 use std::path::Path;
@@ -26,6 +26,16 @@ pub struct Extracted {
 }
 
 impl Extracted {
+    /// The selection `nodes` merged into `mesh`, with its edge report.
+    fn of(nodes: &[u32], mesh: CutMesh) -> Extracted {
+        let edges = edge_report(&mesh.indices, &mesh.positions);
+        Extracted {
+            nodes: nodes.to_vec(),
+            mesh,
+            edges,
+        }
+    }
+
     /// The largest saturated error of the selected nodes (0 for an empty cut).
     pub fn max_node_error<M: PatchReader + ?Sized>(&self, m: &M) -> f32 {
         self.records(m).map(|n| n.error).fold(0.0f32, f32::max)
@@ -53,34 +63,54 @@ impl Extracted {
 const READ_CHUNK: usize = 16;
 
 /// Decodes the patches of `nodes` (node indices of `m`, a local or remote model; in
-/// parallel, [`READ_CHUNK`] per read) and merges them into one mesh in the order given.
-/// A patch that fails its checksum or does not decode fails the whole extraction; the
-/// error names the node. An index outside the node table is an error too.
-pub fn extract_nodes<M: PatchReader + ?Sized>(
+/// parallel, [`READ_CHUNK`] per read), in the order given. A patch that fails its
+/// checksum or does not decode fails the whole call; the error names the node. An index
+/// outside the node table is an error too.
+pub fn decode_nodes<M: PatchReader + ?Sized>(
     m: &M,
     nodes: &[u32],
-) -> Result<Extracted, FormatError> {
-    let patches: Vec<PatchData> = nodes
+) -> Result<Vec<PatchData>, FormatError> {
+    nodes
         .par_chunks(READ_CHUNK)
         .flat_map_iter(|chunk| {
             let ids: Vec<usize> = chunk.iter().map(|&i| i as usize).collect();
             m.decode_patches(&ids)
         })
-        .collect::<Result<_, _>>()?;
-    let mesh = merge_patches(patches.iter().map(|p| PatchRef {
+        .collect()
+}
+
+/// Decodes the patches of `nodes` ([`decode_nodes`]) and merges them into one mesh in
+/// the order given.
+pub fn extract_nodes<M: PatchReader + ?Sized>(
+    m: &M,
+    nodes: &[u32],
+) -> Result<Extracted, FormatError> {
+    let patches = decode_nodes(m, nodes)?;
+    let mesh = merge(&patches);
+    drop(patches);
+    Ok(Extracted::of(nodes, mesh))
+}
+
+/// [`extract_nodes`] that also returns the decoded patches (one per node, in the order
+/// given): a textured cut's glTF writes each patch with its own texture.
+pub fn extract_nodes_keeping<M: PatchReader + ?Sized>(
+    m: &M,
+    nodes: &[u32],
+) -> Result<(Extracted, Vec<PatchData>), FormatError> {
+    let patches = decode_nodes(m, nodes)?;
+    let mesh = merge(&patches);
+    Ok((Extracted::of(nodes, mesh), patches))
+}
+
+/// The welded mesh of decoded patches ([`merge_patches`]).
+fn merge(patches: &[PatchData]) -> CutMesh {
+    merge_patches(patches.iter().map(|p| PatchRef {
         positions: &p.positions,
         normals: &p.normals,
         colors: &p.colors,
         uvs: &p.uvs,
         indices: &p.indices,
-    }));
-    drop(patches);
-    let edges = edge_report(&mesh.indices, &mesh.positions);
-    Ok(Extracted {
-        nodes: nodes.to_vec(),
-        mesh,
-        edges,
-    })
+    }))
 }
 
 /// Writes a merged cut as a binary PLY in model coordinates (grid points through `grid`,

@@ -18,6 +18,9 @@
 //! - [`edges`]: edge-use counts of a mesh ([`edge_report`]), the crack detector.
 //! - `extract` (feature `extract`): a chosen cut decoded, merged and edge-checked as one
 //!   mesh (`extract_nodes`), written as a PLY in model coordinates (`write_cut_ply`).
+//! - `gltf_write` (feature `extract`): a cut written as glTF 2.0, `.glb` or `.gltf`
+//!   (`write_cut_gltf`): the welded mesh with colours, or a textured model's patches
+//!   with their own textures.
 
 pub mod camera;
 pub mod edges;
@@ -25,6 +28,8 @@ pub mod edges;
 pub mod extract;
 #[doc(hidden)]
 pub mod fuzzing;
+#[cfg(feature = "extract")]
+pub mod gltf_write;
 pub mod merge;
 pub mod morph;
 pub mod path;
@@ -34,7 +39,9 @@ pub mod select;
 pub use camera::{Camera, CameraError, CameraErrorKind, Frustum, Orbit, ViewBasis, CAMERA_FIELDS};
 pub use edges::{edge_report, EdgeReport};
 #[cfg(feature = "extract")]
-pub use extract::{extract_nodes, write_cut_ply, Extracted};
+pub use extract::{decode_nodes, extract_nodes, extract_nodes_keeping, write_cut_ply, Extracted};
+#[cfg(feature = "extract")]
+pub use gltf_write::{write_cut_gltf, GltfContainer, GltfContent, GltfSummary};
 pub use merge::{merge_patches, CutMesh, PatchRef};
 pub use morph::{group_ratio, morph_ratio, refinement_ratio, DEFAULT_MORPH_WINDOW};
 pub use path::{CameraPath, PathError, PATH_FIELDS};
