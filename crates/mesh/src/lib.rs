@@ -104,8 +104,9 @@ fn head_of(r: impl std::io::Read, n: u64) -> std::io::Result<Vec<u8>> {
 /// every scene; else every mesh once), placed by its node's world transform, a mirroring
 /// transform flipping the winding; colour = `COLOR_0` x the material's base colour
 /// factor, in sRGB; UVs through the base colour texture's `KHR_texture_transform`.
-/// `KHR_mesh_quantization` and `EXT_meshopt_compression` are read; Draco and any other
-/// required extension are refused by name. Buffers are memory-mapped, not read into
+/// `KHR_mesh_quantization`, `EXT_meshopt_compression` and `KHR_draco_mesh_compression`
+/// (decoded in pure Rust, a Draco primitive whole, once per mesh) are read; any other
+/// required extension is refused by name. Buffers are memory-mapped, not read into
 /// memory.
 ///
 /// Textures (OBJ `map_Kd`, glTF `baseColorTexture` through `TEXCOORD_0`, PNG or JPEG):

@@ -61,36 +61,7 @@ impl<'a> Accessor<'a> {
         let path = views.path;
         let name = format!("accessor {index} ({what})");
         let bad = |why: String| MeshError::malformed(path, &name, why);
-        let a = views.root.accessors.get(index).ok_or_else(|| {
-            bad(format!(
-                "does not exist (the file has {} accessors)",
-                views.root.accessors.len()
-            ))
-        })?;
-        let Checked::Valid(kind) = a.component_type else {
-            return Err(bad("unknown componentType".into()));
-        };
-        let kind = kind.0;
-        let n = match a.type_ {
-            Checked::Valid(json::accessor::Type::Scalar) => 1,
-            Checked::Valid(json::accessor::Type::Vec2) => 2,
-            Checked::Valid(json::accessor::Type::Vec3) => 3,
-            Checked::Valid(json::accessor::Type::Vec4) => 4,
-            Checked::Valid(_) => 0,
-            Checked::Invalid => return Err(bad("unknown type".into())),
-        };
-        if !components.contains(&n) {
-            let want: Vec<String> = components.iter().map(|c| type_name(*c)).collect();
-            return Err(bad(format!(
-                "has type {}, {what} must be {}",
-                if n == 0 {
-                    "MAT*".to_string()
-                } else {
-                    type_name(n)
-                },
-                want.join(" or ")
-            )));
-        }
+        let (a, kind, n) = typed(views, index, what, components, &name)?;
         let count = usize::try_from(a.count.0).map_err(|_| bad("count is too large".into()))?;
         let elem_size = kind.size() * n;
         let data = match a.buffer_view {
@@ -144,6 +115,64 @@ impl<'a> Accessor<'a> {
             data,
             sparse,
         })
+    }
+
+    /// Accessor `index`, read as `what` with one of `components` components, whose
+    /// values were decoded from a `KHR_draco_mesh_compression` stream: `count` elements
+    /// of `value_components` little-endian `f32`s in `values`, which must agree with the
+    /// accessor's type.
+    pub(crate) fn decoded(
+        views: &Views<'a>,
+        index: usize,
+        what: &str,
+        components: &[usize],
+        (value_components, values): (usize, &'a [u8]),
+        count: usize,
+    ) -> Result<Accessor<'a>, MeshError> {
+        let name = format!("accessor {index} ({what}, from KHR_draco_mesh_compression)");
+        let (_, _, n) = typed(views, index, what, components, &name)?;
+        if n != value_components {
+            return Err(MeshError::malformed(
+                views.path,
+                &name,
+                format!(
+                    "has type {}, its Draco attribute has {value_components} components",
+                    type_name(n)
+                ),
+            ));
+        }
+        Ok(Accessor::packed(name, values, count, n, ComponentType::F32))
+    }
+
+    /// Triangle corners decoded from a `KHR_draco_mesh_compression` stream: little-endian
+    /// `u32`s in `values`, read as an index accessor named `name`.
+    pub(crate) fn decoded_indices(name: String, values: &'a [u8]) -> Accessor<'a> {
+        Accessor::packed(name, values, values.len() / 4, 1, ComponentType::U32)
+    }
+
+    /// Tightly packed elements of `components` x `kind` (4-byte kinds only).
+    fn packed(
+        name: String,
+        values: &'a [u8],
+        count: usize,
+        components: usize,
+        kind: ComponentType,
+    ) -> Accessor<'a> {
+        let elem_size = 4 * components;
+        // The decoder wrote exactly `count` elements; fewer bytes would be our bug, and
+        // are read as fewer elements rather than out of bounds.
+        debug_assert!(values.len() >= count * elem_size);
+        let count = count.min(values.len() / elem_size.max(1));
+        Accessor {
+            name,
+            count,
+            components,
+            kind,
+            normalized: false,
+            elem_size,
+            data: Some((values, elem_size)),
+            sparse: None,
+        }
     }
 
     /// Call `f(k, bytes)` for elements `start + k`, `k < n`, with each element's bytes
@@ -248,6 +277,48 @@ impl<'a> Accessor<'a> {
     pub(crate) fn is_float_or_normalized(&self) -> bool {
         self.kind == ComponentType::F32 || self.normalized
     }
+}
+
+/// Accessor `index` of the document, its component type and its number of components,
+/// which must be one of `components` for it to be read as `what` (`name` in messages).
+fn typed<'r>(
+    views: &Views<'r>,
+    index: usize,
+    what: &str,
+    components: &[usize],
+    name: &str,
+) -> Result<(&'r json::Accessor, ComponentType, usize), MeshError> {
+    let bad = |why: String| MeshError::malformed(views.path, name, why);
+    let a = views.root.accessors.get(index).ok_or_else(|| {
+        bad(format!(
+            "does not exist (the file has {} accessors)",
+            views.root.accessors.len()
+        ))
+    })?;
+    let Checked::Valid(kind) = a.component_type else {
+        return Err(bad("unknown componentType".into()));
+    };
+    let n = match a.type_ {
+        Checked::Valid(json::accessor::Type::Scalar) => 1,
+        Checked::Valid(json::accessor::Type::Vec2) => 2,
+        Checked::Valid(json::accessor::Type::Vec3) => 3,
+        Checked::Valid(json::accessor::Type::Vec4) => 4,
+        Checked::Valid(_) => 0,
+        Checked::Invalid => return Err(bad("unknown type".into())),
+    };
+    if !components.contains(&n) {
+        let want: Vec<String> = components.iter().map(|c| type_name(*c)).collect();
+        return Err(bad(format!(
+            "has type {}, {what} must be {}",
+            if n == 0 {
+                "MAT*".to_string()
+            } else {
+                type_name(n)
+            },
+            want.join(" or ")
+        )));
+    }
+    Ok((a, kind.0, n))
 }
 
 fn type_name(n: usize) -> String {

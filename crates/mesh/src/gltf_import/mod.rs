@@ -16,15 +16,16 @@
 //! 2. **Buffers.** Only the buffers the draws read are opened: the GLB's binary chunk
 //!    and external files memory-mapped, `data:` URIs decoded ([`container`]).
 //! 3. **Stream.** Instances are taken mesh by mesh (a mesh's `EXT_meshopt_compression`
-//!    views are decoded once for all its instances); each draw delivers its vertices in
-//!    chunks of [`CHUNK`] (position through the world transform, normal through its
-//!    inverse transpose and renormalised, UV through the base colour texture's
-//!    `KHR_texture_transform`, colour = `COLOR_0` x the material's base colour factor),
-//!    then its triangles (lists, strips and fans; winding flipped under a mirroring
-//!    transform), indices checked against the primitive's vertex count.
+//!    views and `KHR_draco_mesh_compression` primitives ([`draco`]) are decoded once for
+//!    all its instances); each draw delivers its vertices in chunks of [`CHUNK`]
+//!    (position through the world transform, normal through its inverse transpose and
+//!    renormalised, UV through the base colour texture's `KHR_texture_transform`,
+//!    colour: `COLOR_0` x the material's base colour factor), then its triangles
+//!    (lists, strips and fans; a Draco primitive's decoded faces; winding flipped under
+//!    a mirroring transform), indices checked against the primitive's vertex count.
 //!
-//! Memory is bounded by the chunk, the decoded meshopt views of one mesh, and sparse
-//! accessors' substitutes, whatever the size of the buffers.
+//! Memory is bounded by the chunk, the decoded meshopt views and Draco primitives of one
+//! mesh, and sparse accessors' substitutes, whatever the size of the buffers.
 //!
 //! Colours: glTF's `COLOR_0` and `baseColorFactor` are linear; Tessera's colours are
 //! displayed as they are (like the sRGB bytes of a PLY), so they are encoded to sRGB.
@@ -38,15 +39,21 @@
 //! (another coordinate set, another image format, a missing or unreadable image) are
 //! named in the report and a warning; their vertices are untextured, so a model never
 //! turns black or silently wrong.
-//! `KHR_draco_mesh_compression` is refused with a message saying how to decompress.
+//!
+//! `KHR_draco_mesh_compression` primitives are decoded with `draco-core` (see [`draco`]
+//! for what is read and how), through the same transforms, materials, textures and
+//! checks as uncompressed ones; a stream that does not decode is an error naming the
+//! primitive.
 
 mod accessor;
 mod container;
+mod draco;
 mod material;
 mod primitive;
 mod scene;
 mod texture;
 
+use std::collections::hash_map::Entry;
 use std::collections::HashMap;
 use std::path::Path;
 
@@ -56,6 +63,7 @@ use json::validation::Checked;
 use crate::common::{finish_report, note_ignored, PolygonEmitter};
 use crate::{Attributes, ImportReport, MeshError, MeshHeader, MeshVisitor, NO_TEXTURE};
 use container::{BufferData, Resolver, Views};
+use draco::DracoPrim;
 use material::MaterialUse;
 use scene::Mat4;
 
@@ -65,19 +73,21 @@ pub(crate) use container::GLB_MAGIC;
 /// small enough (a few MB of scratch) to keep memory flat.
 const CHUNK: usize = 1 << 16;
 
-/// Extensions a file may require. The image formats are harmless: textures only in them
-/// are not used (their materials are drawn in their base colour, with a warning).
+/// Extensions a file may require (the first [`SUPPORTED_NAMED`] are named in the error
+/// for others). The image formats are harmless: textures only in them are not used
+/// (their materials are drawn in their base colour, with a warning).
 const SUPPORTED_REQUIRED: &[&str] = &[
     "KHR_mesh_quantization",
     "EXT_meshopt_compression",
     "KHR_meshopt_compression",
+    "KHR_draco_mesh_compression",
     "KHR_texture_transform",
     "KHR_texture_basisu",
     "EXT_texture_webp",
     "EXT_texture_avif",
 ];
 
-const DRACO: &str = "KHR_draco_mesh_compression";
+const SUPPORTED_NAMED: usize = 5;
 
 /// Read the `.gltf` or `.glb` file at `path`; external buffers are looked up beside it.
 pub(crate) fn read_gltf(
@@ -175,6 +185,7 @@ pub(crate) fn read_gltf_from(
     })?;
 
     let mut decoded = HashMap::new();
+    let mut draco_decoded = HashMap::new();
     let mut decoded_for: Option<usize> = None;
     let mut emitter = PolygonEmitter::default();
     let mut base: u64 = 0;
@@ -182,6 +193,7 @@ pub(crate) fn read_gltf_from(
         if decoded_for != Some(d.mesh) {
             // The previous mesh's views are freed before this one's are decoded.
             decoded.clear();
+            draco_decoded.clear();
             let mine = draws.iter().filter(|x| x.mesh == d.mesh);
             decoded = decode_meshopt_views(path, &root, bytes, &buffers, mine)?;
             decoded_for = Some(d.mesh);
@@ -193,9 +205,16 @@ pub(crate) fn read_gltf_from(
             buffers: &buffers,
             decoded: &decoded,
         };
+        // A Draco primitive is decoded once for all the mesh's instances.
+        if let Some(dp) = &d.draco {
+            if let Entry::Vacant(e) = draco_decoded.entry(d.primitive) {
+                e.insert(draco::decode(&views, d, dp)?);
+            }
+        }
         let n = primitive::emit_draw(
             &views,
             d,
+            d.draco.as_ref().and(draco_decoded.get(&d.primitive)),
             attributes,
             base,
             &mut emitter,
@@ -284,24 +303,9 @@ fn parse_json(path: &Path, json_bytes: &[u8]) -> Result<json::Root, MeshError> {
     }
 }
 
-/// The error for a file that needs Draco.
-fn draco_error(path: &Path) -> MeshError {
-    MeshError::malformed(
-        path,
-        "extensionsRequired",
-        format!(
-            "the file requires {DRACO} (Draco-compressed geometry), which Tessera does not decode; \
-             decompress it first, e.g. `npx @gltf-transform/cli copy IN.glb OUT.glb` (gltf-transform decodes Draco and writes plain accessors)"
-        ),
-    )
-}
-
 fn check_required(path: &Path, root: &json::Root) -> Result<(), MeshError> {
     let mut unsupported = Vec::new();
     for ext in &root.extensions_required {
-        if ext == DRACO {
-            return Err(draco_error(path));
-        }
         if !SUPPORTED_REQUIRED.contains(&ext.as_str()) {
             unsupported.push(ext.as_str());
         }
@@ -314,7 +318,7 @@ fn check_required(path: &Path, root: &json::Root) -> Result<(), MeshError> {
                 "the file requires the glTF extension{} {}, which Tessera does not support (it reads {})",
                 if unsupported.len() > 1 { "s" } else { "" },
                 unsupported.join(", "),
-                SUPPORTED_REQUIRED[..4].join(", ")
+                SUPPORTED_REQUIRED[..SUPPORTED_NAMED].join(", ")
             ),
         ));
     }
@@ -330,6 +334,8 @@ enum Mode {
 /// One primitive of one instance, to be delivered.
 struct Draw {
     mesh: usize,
+    /// Its index in the mesh.
+    primitive: usize,
     /// `mesh 0 primitive 1`, for messages.
     name: String,
     mode: Mode,
@@ -342,24 +348,37 @@ struct Draw {
     material: MaterialUse,
     /// The texture its vertices sample ([`NO_TEXTURE`]: none); only with `uv`.
     texture: u32,
+    /// Read from its `KHR_draco_mesh_compression` stream (attributes the stream has,
+    /// and the triangles), not from the accessors.
+    draco: Option<DracoPrim>,
 }
 
 impl Draw {
+    /// The accessors whose data it reads (not those the Draco stream stands for).
     fn accessors(&self) -> impl Iterator<Item = usize> + '_ {
+        use draco::Role;
+        let from_draco = |r: Option<Role>| match (&self.draco, r) {
+            (None, _) => false,
+            (Some(dp), Some(r)) => dp.id(r).is_some(),
+            // The indices.
+            (Some(_), None) => true,
+        };
         [
-            Some(self.position),
-            self.normal,
-            self.uv,
-            self.color,
-            self.indices,
+            (Some(self.position), Some(Role::Position)),
+            (self.normal, Some(Role::Normal)),
+            (self.uv, Some(Role::Uv)),
+            (self.color, Some(Role::Color)),
+            (self.indices, None),
         ]
         .into_iter()
-        .flatten()
+        .filter(move |&(_, r)| !from_draco(r))
+        .filter_map(|(a, _)| a)
     }
 
-    /// The buffer views its accessors read (base data and sparse parts).
+    /// The buffer views it reads: its accessors' (base data and sparse parts) and its
+    /// Draco stream's.
     fn views(&self, root: &json::Root) -> Vec<usize> {
-        let mut v = Vec::new();
+        let mut v: Vec<usize> = self.draco.iter().map(|dp| dp.view).collect();
         for a in self.accessors().filter_map(|a| root.accessors.get(a)) {
             v.extend(a.buffer_view.map(|b| b.value()));
             if let Some(s) = &a.sparse {
@@ -375,6 +394,10 @@ impl Draw {
             Some(i) => root.accessors.get(i).map_or(0, |a| a.count.0),
             None => root.accessors.get(self.position).map_or(0, |a| a.count.0),
         };
+        if self.draco.is_some() {
+            // Draco decodes faces, three indices each.
+            return n / 3;
+        }
         match self.mode {
             Mode::Triangles => n / 3,
             Mode::Strip | Mode::Fan => n.saturating_sub(2),
@@ -437,25 +460,14 @@ fn plan(
                 note_ignored(report, "primitive without POSITION", 1);
                 continue;
             };
-            let draco = prim
-                .extensions
-                .as_ref()
-                .is_some_and(|e| e.others.contains_key(DRACO));
-            if draco
-                && root
-                    .accessors
-                    .get(position)
-                    .is_some_and(|a| a.buffer_view.is_none())
-            {
-                // Draco without an uncompressed fallback.
-                return Err(draco_error(path));
-            }
             if prim.targets.as_ref().is_some_and(|t| !t.is_empty()) {
                 note_ignored(report, "morph targets (base shape used)", 1);
             }
             let material = MaterialUse::of(path, root, prim.material.map(|m| m.value()))?;
+            let draco = draco::plan_of(path, root, prim, &name, material.uv_set)?;
             draws.push(Draw {
                 mesh: inst.mesh,
+                primitive: p,
                 name,
                 mode,
                 world: inst.world,
@@ -466,6 +478,7 @@ fn plan(
                 indices: prim.indices.map(|i| i.value()),
                 material,
                 texture: NO_TEXTURE,
+                draco,
             });
         }
     }

@@ -3,20 +3,26 @@
 //! renormalised; UVs through the texture transform; colours times the base colour factor,
 //! encoded to sRGB), then its triangles assembled from lists, strips or fans, every index
 //! checked against the primitive's vertex count and the winding flipped under a mirror.
+//! A `KHR_draco_mesh_compression` primitive goes the same way, its decoded attributes
+//! read like accessors and its Draco faces as a triangle list.
 
 use crate::common::{note_ignored, PolygonEmitter};
 use crate::{Attributes, ImportReport, MeshError, MeshVisitor, Vertex};
 
 use super::accessor::Accessor;
 use super::container::Views;
+use super::draco::{Decoded, Role};
 use super::material::srgb8;
 use super::{scene, Draw, Mode, CHUNK};
 
 /// Deliver one draw: its vertices (numbered from `base`), then its triangles. Returns
-/// the number of vertices delivered.
+/// the number of vertices delivered. `draco`: the draw's decoded Draco stream, for a
+/// draw read from one.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn emit_draw(
     views: &Views<'_>,
     d: &Draw,
+    draco: Option<&Decoded>,
     attributes: Attributes,
     base: u64,
     emitter: &mut PolygonEmitter,
@@ -24,28 +30,34 @@ pub(super) fn emit_draw(
     report: &mut ImportReport,
 ) -> Result<u64, MeshError> {
     let path = views.path;
-    let pos = Accessor::open(views, d.position, &format!("POSITION of {}", d.name), &[3])?;
+    // From the Draco stream where it has the attribute, else from the accessor.
+    let open = |role: Role, a: usize, what: &str, components: &[usize]| {
+        let what = format!("{what} of {}", d.name);
+        let decoded = draco.and_then(|x| x.attrs[role as usize].as_ref());
+        match (decoded, draco) {
+            (Some((c, values)), Some(x)) => {
+                Accessor::decoded(views, a, &what, components, (*c, values), x.points)
+            }
+            _ => Accessor::open(views, a, &what, components),
+        }
+    };
+    let pos = open(Role::Position, d.position, "POSITION", &[3])?;
     let normal = match d.normal {
-        Some(a) if attributes.normals => Some(Accessor::open(
-            views,
-            a,
-            &format!("NORMAL of {}", d.name),
-            &[3],
-        )?),
+        Some(a) if attributes.normals => Some(open(Role::Normal, a, "NORMAL", &[3])?),
         _ => None,
     };
     let uv = match d.uv {
-        Some(a) => Some(Accessor::open(
-            views,
+        Some(a) => Some(open(
+            Role::Uv,
             a,
-            &format!("TEXCOORD_{} of {}", d.material.uv_set, d.name),
+            &format!("TEXCOORD_{}", d.material.uv_set),
             &[2],
         )?),
         None => None,
     };
     let color = match d.color {
         Some(a) => {
-            let c = Accessor::open(views, a, &format!("COLOR_0 of {}", d.name), &[3, 4])?;
+            let c = open(Role::Color, a, "COLOR_0", &[3, 4])?;
             if !c.is_float_or_normalized() {
                 return Err(MeshError::malformed(
                     path,
@@ -66,13 +78,23 @@ pub(super) fn emit_draw(
             ));
         }
     }
-    let indices = match d.indices {
-        Some(a) => {
+    let indices = match (draco, d.indices) {
+        (Some(x), _) => Some(Accessor::decoded_indices(
+            format!("faces of {} (from KHR_draco_mesh_compression)", d.name),
+            &x.indices,
+        )),
+        (None, Some(a)) => {
             let acc = Accessor::open(views, a, &format!("indices of {}", d.name), &[1])?;
             acc.check_index_type(views)?;
             Some(acc)
         }
-        None => None,
+        (None, None) => None,
+    };
+    // Draco decodes faces: a triangle list whatever the primitive's mode.
+    let mode = if draco.is_some() {
+        Mode::Triangles
+    } else {
+        d.mode
     };
 
     // Vertices.
@@ -167,7 +189,7 @@ pub(super) fn emit_draw(
     // Triangles.
     let corner_count = indices.as_ref().map_or(count, |a| a.count);
     let mut buf = Vec::new();
-    let mut asm = Assembler::new(d.mode);
+    let mut asm = Assembler::new(mode);
     let check = |i: u32, k: usize| -> Result<u32, MeshError> {
         if (i as usize) < count {
             Ok(i)
@@ -204,7 +226,7 @@ pub(super) fn emit_draw(
         }
         start += len;
     }
-    if d.mode == Mode::Triangles && corner_count % 3 != 0 {
+    if mode == Mode::Triangles && corner_count % 3 != 0 {
         note_ignored(report, "indices after the last whole triangle", 1);
     }
     Ok(count as u64)
