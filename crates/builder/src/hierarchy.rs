@@ -575,6 +575,7 @@ pub(crate) fn build_hierarchy(
                 opts.texture,
                 opts.memory_bytes / 2,
             )
+            .spool_in(tmp)
         }),
     };
     let total_diamonds: usize = by_level.iter().map(|m| m.len()).sum();

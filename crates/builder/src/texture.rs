@@ -15,16 +15,32 @@
 //! ([`TextureChart`]); untextured vertices of a textured model (a material without an
 //! image, an image that cannot be read) get solid-colour texels of their vertex colour.
 //!
+//! Source images are out of core like the geometry: each is decoded once, the first
+//! time a patch needs it, into its box-filtered pyramid, which is written level by level
+//! as raw RGBA8 rows to a temporary *texel spool* in the build's temporary directory
+//! (4/3 x 4 bytes per source texel on disk); patches read back only the rows of their
+//! rectangles (positioned reads, which the page cache serves, not the build's memory).
+//! No pyramid is held in memory: a coarse patch that spans dozens of images holds only
+//! its own rectangles' texels, and no image is decoded twice whatever the order the
+//! hierarchy visits them in. Decoding is what needs memory (the decoder's output, its
+//! RGBA8 copy and the next level: about 8 bytes per texel of the image at once), so
+//! concurrent decodes are limited to what fits the stage's budget (half of `--memory`;
+//! one image larger than that decodes alone).
+//!
 //! The shelf packer and the box filter are written here: they are a few lines each, and
 //! the packing crates on crates.io pack into fixed bins or need the whole set at once
 //! with rotation, which would break the affine UV maps.
 
 use std::io::{Read, Seek, SeekFrom};
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Arc, Mutex, OnceLock};
+use std::sync::{Arc, Condvar, Mutex, OnceLock};
 
 use rustc_hash::FxHashMap;
-use tessera_format::{PatchTexture, TextureChart, TextureCodec, MAX_PATCH_CHARTS, MAX_TEXTURE_DIM};
+use tessera_format::{
+    PatchSpool, PatchTexture, SpooledPatch, TextureChart, TextureCodec, MAX_PATCH_CHARTS,
+    MAX_TEXTURE_DIM,
+};
 use tessera_mesh::{ImageSource, TextureSource, Wrap, NO_TEXTURE};
 
 use crate::patch::WorkVertex;
@@ -81,40 +97,63 @@ pub struct TextureReport {
     /// Images that could not be read, each once as `name: why`; their vertices are drawn
     /// in their vertex colour.
     pub unreadable_images: Vec<String>,
-    /// Times a source image was decoded again after the memory bound evicted it.
+    /// Times a source image was decoded again. Always 0 since decoded pyramids are
+    /// spooled to disk (each image is decoded once); kept for the report's readers.
     pub image_redecodes: u64,
 }
 
-/// One source image and its box-filtered pyramid (level 0 = the source).
+/// Decoded bytes per texel a decode holds at once (estimate for the decode gate): the
+/// decoder's output (up to 3 bytes a texel for JPEG, 4 for 8-bit PNG), its RGBA8 copy
+/// (4) and the next pyramid level (1).
+const DECODE_BYTES_PER_TEXEL: u64 = 8;
+
+/// One source image's box-filtered pyramid (level 0 = the source), stored in the texel
+/// spool.
 struct Pyramid {
     levels: Vec<Level>,
 }
 
+/// A pyramid level: `w x h` RGBA8 texels, row-major, at `offset` in the texel spool.
 struct Level {
+    w: u32,
+    h: u32,
+    offset: u64,
+}
+
+/// Texels in memory (while a pyramid is built).
+struct Texels {
     w: u32,
     h: u32,
     rgba: Vec<u8>,
 }
 
-impl Pyramid {
-    fn new(w: u32, h: u32, rgba: Vec<u8>) -> Pyramid {
-        let mut levels = vec![Level { w, h, rgba }];
-        while let Some(l) = levels.last().filter(|l| l.w > 1 || l.h > 1) {
-            levels.push(half(l));
+/// Builds the pyramid of `level0` one level at a time, handing each to `store` (which
+/// returns where it put it) before computing the next from it, so at most two levels
+/// are in memory.
+fn build_pyramid<E>(
+    level0: Texels,
+    mut store: impl FnMut(&Texels) -> Result<u64, E>,
+) -> Result<Vec<Level>, E> {
+    let mut levels = Vec::new();
+    let mut l = level0;
+    loop {
+        levels.push(Level {
+            w: l.w,
+            h: l.h,
+            offset: store(&l)?,
+        });
+        if l.w <= 1 && l.h <= 1 {
+            return Ok(levels);
         }
-        Pyramid { levels }
-    }
-
-    fn bytes(&self) -> u64 {
-        self.levels.iter().map(|l| l.rgba.len() as u64).sum()
+        l = half(&l);
     }
 }
 
 /// The next pyramid level: `ceil(w/2) x ceil(h/2)`, each texel the mean of the (up to)
 /// four it covers.
-fn half(l: &Level) -> Level {
+fn half(l: &Texels) -> Texels {
     let (w, h) = (l.w.div_ceil(2), l.h.div_ceil(2));
-    let mut rgba = vec![0u8; (w * h * 4) as usize];
+    let mut rgba = vec![0u8; (w as usize) * (h as usize) * 4];
     for y in 0..h {
         for x in 0..w {
             let mut sum = [0u32; 4];
@@ -122,39 +161,80 @@ fn half(l: &Level) -> Level {
             for (sx, sy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
                 let (xx, yy) = (2 * x + sx, 2 * y + sy);
                 if xx < l.w && yy < l.h {
-                    let o = ((yy * l.w + xx) * 4) as usize;
+                    let o = ((yy as usize) * (l.w as usize) + xx as usize) * 4;
                     for c in 0..4 {
                         sum[c] += l.rgba[o + c] as u32;
                     }
                     n += 1;
                 }
             }
-            let o = ((y * w + x) * 4) as usize;
+            let o = ((y as usize) * (w as usize) + x as usize) * 4;
             for c in 0..4 {
                 rgba[o + c] = ((sum[c] + n / 2) / n) as u8;
             }
         }
     }
-    Level { w, h, rgba }
+    Texels { w, h, rgba }
 }
 
-type Decoded = Result<Arc<Pyramid>, String>;
+/// Why an image has no pyramid.
+#[derive(Clone, Debug)]
+enum Failed {
+    /// The image cannot be read or decoded: its faces take their vertex colour.
+    Unreadable(String),
+    /// The texel spool could not be written: the build fails.
+    Spool(String),
+}
 
-/// Decoded source images, shared by the build threads, bounded by bytes: the least
-/// recently used pyramid is dropped when a new one would exceed the bound (a later
-/// patch needing it decodes it again, counted in [`TextureReport::image_redecodes`]).
-struct ImageCache {
+type Decoded = Result<Arc<Pyramid>, Failed>;
+
+/// Limits the decoded bytes of the images being decoded at once to a budget (one image
+/// larger than the budget decodes alone). Holders wait for nothing else, so it cannot
+/// deadlock.
+struct DecodeGate {
     budget: u64,
-    slots: FxHashMap<ImageSource, (Arc<OnceLock<Decoded>>, u64)>,
-    clock: u64,
-    decoded_before: rustc_hash::FxHashSet<ImageSource>,
+    in_flight: Mutex<u64>,
+    freed: Condvar,
+}
+
+impl DecodeGate {
+    fn enter(&self, bytes: u64) -> DecodeTicket<'_> {
+        let mut held = self.in_flight.lock().unwrap_or_else(|e| e.into_inner());
+        while *held > 0 && *held + bytes > self.budget {
+            held = self.freed.wait(held).unwrap_or_else(|e| e.into_inner());
+        }
+        *held += bytes;
+        DecodeTicket { gate: self, bytes }
+    }
+}
+
+struct DecodeTicket<'a> {
+    gate: &'a DecodeGate,
+    bytes: u64,
+}
+
+impl Drop for DecodeTicket<'_> {
+    fn drop(&mut self) {
+        let mut held = self
+            .gate
+            .in_flight
+            .lock()
+            .unwrap_or_else(|e| e.into_inner());
+        *held -= self.bytes;
+        self.gate.freed.notify_all();
+    }
 }
 
 /// Cuts the textures of every patch; see the module docs.
 pub struct Baker {
     sources: Vec<TextureSource>,
     options: TextureOptions,
-    cache: Mutex<ImageCache>,
+    /// Each image's pyramid, decoded on first use (one thread decodes, the others wait).
+    images: Mutex<FxHashMap<ImageSource, Arc<OnceLock<Decoded>>>>,
+    /// Where the texel spool goes, and the spool (created by the first decode).
+    spool_dir: PathBuf,
+    spool: OnceLock<Result<PatchSpool, String>>,
+    gate: DecodeGate,
     report: Mutex<TextureReport>,
     texels: AtomicU64,
     leaf_texels: AtomicU64,
@@ -212,21 +292,33 @@ fn find(parent: &mut [u32], mut i: u32) -> u32 {
 }
 
 impl Baker {
+    /// A baker of the textures `sources`, whose decodes together hold at most about
+    /// `memory_bytes` (see the module docs). Its texel spool goes to the system's
+    /// temporary directory unless [`Baker::spool_in`] says where.
     pub fn new(sources: Vec<TextureSource>, options: TextureOptions, memory_bytes: u64) -> Baker {
         Baker {
             sources,
             options,
-            cache: Mutex::new(ImageCache {
+            images: Mutex::new(FxHashMap::default()),
+            spool_dir: std::env::temp_dir(),
+            spool: OnceLock::new(),
+            gate: DecodeGate {
                 budget: memory_bytes.max(64 << 20),
-                slots: FxHashMap::default(),
-                clock: 0,
-                decoded_before: Default::default(),
-            }),
+                in_flight: Mutex::new(0),
+                freed: Condvar::new(),
+            },
             report: Mutex::new(TextureReport::default()),
             texels: AtomicU64::new(0),
             leaf_texels: AtomicU64::new(0),
             bytes: AtomicU64::new(0),
         }
+    }
+
+    /// Puts the texel spool (4/3 x 4 bytes per source texel) in `dir`, ideally the
+    /// build's temporary directory. Call before the first [`Baker::bake`].
+    pub fn spool_in(mut self, dir: &Path) -> Baker {
+        self.spool_dir = dir.to_path_buf();
+        self
     }
 
     /// The report so far (call once the hierarchy is built).
@@ -238,73 +330,94 @@ impl Baker {
         r
     }
 
+    fn spool(&self) -> Result<&PatchSpool, Failed> {
+        self.spool
+            .get_or_init(|| PatchSpool::new(&self.spool_dir).map_err(|e| e.to_string()))
+            .as_ref()
+            .map_err(|e| Failed::Spool(e.clone()))
+    }
+
+    fn spool_error(&self, message: String) -> BuildError {
+        BuildError::Io {
+            path: self.spool_dir.clone(),
+            cause: std::io::Error::other(format!("texel spool: {message}")),
+        }
+    }
+
     /// The pyramid of texture `t`'s image, decoding it on first use (one thread decodes,
     /// the others wait for it); `None` when it cannot be read (reported once).
-    fn pyramid(&self, t: u32) -> Option<Arc<Pyramid>> {
-        let src = self.sources.get(t as usize)?;
-        let cell = {
-            let mut c = self.cache.lock().ok()?;
-            c.clock += 1;
-            let clock = c.clock;
-            let cell = c
-                .slots
-                .entry(src.image.clone())
-                .or_insert_with(|| (Arc::new(OnceLock::new()), clock));
-            cell.1 = clock;
-            cell.0.clone()
+    fn pyramid(&self, t: u32) -> Result<Option<Arc<Pyramid>>, BuildError> {
+        let Some(src) = self.sources.get(t as usize) else {
+            return Ok(None);
         };
-        let decoded = cell.get_or_init(|| self.decode(src));
-        match decoded {
-            Ok(p) => Some(p.clone()),
-            Err(_) => None,
+        let cell = {
+            let mut images = self
+                .images
+                .lock()
+                .map_err(|_| BuildError::Internal("poisoned image map".into()))?;
+            images.entry(src.image.clone()).or_default().clone()
+        };
+        match cell.get_or_init(|| self.decode(src)) {
+            Ok(p) => Ok(Some(p.clone())),
+            Err(Failed::Unreadable(_)) => Ok(None),
+            Err(Failed::Spool(e)) => Err(self.spool_error(e.clone())),
         }
     }
 
     fn decode(&self, src: &TextureSource) -> Decoded {
-        let result = read_image(&src.image).map(|(w, h, rgba)| Arc::new(Pyramid::new(w, h, rgba)));
-        let mut report = self.report.lock().map_err(|_| "poisoned".to_string())?;
+        // An image whose size the importer could not read decodes alone.
+        let estimate = match src.size {
+            [0, _] | [_, 0] => self.gate.budget,
+            [w, h] => u64::from(w) * u64::from(h) * DECODE_BYTES_PER_TEXEL,
+        };
+        let ticket = self.gate.enter(estimate);
+        let result = match read_image(&src.image) {
+            Ok((w, h, rgba)) => {
+                let spool = self.spool()?;
+                let levels = build_pyramid(Texels { w, h, rgba }, |l| {
+                    spool
+                        .append(&l.rgba)
+                        .map(|sp| sp.offset)
+                        .map_err(|e| Failed::Spool(e.to_string()))
+                })?;
+                Ok(Arc::new(Pyramid { levels }))
+            }
+            Err(e) => Err(Failed::Unreadable(e)),
+        };
+        drop(ticket);
+        let mut report = self
+            .report
+            .lock()
+            .map_err(|_| Failed::Spool("poisoned report".into()))?;
         match &result {
             Ok(p) => {
-                let mut c = self.cache.lock().map_err(|_| "poisoned".to_string())?;
-                if !c.decoded_before.insert(src.image.clone()) {
-                    report.image_redecodes += 1;
-                } else {
-                    report.source_images += 1;
-                    report.source_texels += u64::from(p.levels[0].w) * u64::from(p.levels[0].h);
-                }
-                // Evict least recently used decoded pyramids beyond the budget.
-                let mut held: u64 = c
-                    .slots
-                    .values()
-                    .filter_map(|(cell, _)| cell.get().and_then(|d| d.as_ref().ok()))
-                    .map(|p| p.bytes())
-                    .sum::<u64>()
-                    + p.bytes();
-                while held > c.budget {
-                    let victim = c
-                        .slots
-                        .iter()
-                        .filter(|(k, (cell, _))| {
-                            **k != src.image && matches!(cell.get(), Some(Ok(_)))
-                        })
-                        .min_by_key(|(_, (_, t))| *t)
-                        .map(|(k, (cell, _))| (k.clone(), cell.clone()));
-                    let Some((k, cell)) = victim else { break };
-                    if let Some(Ok(p)) = cell.get() {
-                        held = held.saturating_sub(p.bytes());
-                    }
-                    c.slots.remove(&k);
-                }
+                report.source_images += 1;
+                report.source_texels += u64::from(p.levels[0].w) * u64::from(p.levels[0].h);
             }
-            Err(e) => {
+            Err(Failed::Unreadable(e)) => {
                 let line = format!("{}: {e}", src.image_name);
                 if !report.unreadable_images.contains(&line) {
                     tracing::warn!("texture image {line}; its faces are drawn in their colour");
                     report.unreadable_images.push(line);
                 }
             }
+            Err(Failed::Spool(_)) => {}
         }
         result
+    }
+
+    /// Row `y` of level `l`, texels `x0..x1`, from the spool.
+    fn read_row(&self, l: &Level, y: i64, x0: i64, x1: i64) -> Result<Vec<u8>, BuildError> {
+        let spool = self.spool().map_err(|e| match e {
+            Failed::Spool(m) | Failed::Unreadable(m) => self.spool_error(m),
+        })?;
+        let bytes = ((x1 - x0) * 4) as u32;
+        let offset = l.offset + ((y as u64) * u64::from(l.w) + x0 as u64) * 4;
+        Ok(spool.read(&SpooledPatch {
+            offset,
+            bytes,
+            crc32: 0,
+        })?)
     }
 
     /// The texture of one patch. `target_uvs` (empty for roots) holds each vertex's
@@ -324,7 +437,7 @@ impl Baker {
         let mut pyramids: FxHashMap<u32, Option<Arc<Pyramid>>> = FxHashMap::default();
         for v in vertices {
             if v.texture != NO_TEXTURE && !pyramids.contains_key(&v.texture) {
-                pyramids.insert(v.texture, self.pyramid(v.texture));
+                pyramids.insert(v.texture, self.pyramid(v.texture)?);
             }
         }
         let textured = |v: &WorkVertex| {
@@ -532,12 +645,25 @@ impl Baker {
                 let src = &self.sources[r.texture as usize];
                 let l = &pyramids[&r.texture].as_ref().expect("textured").levels[r.level];
                 let tint = src.tint;
+                // The source columns the rectangle reads: its own span when it lies inside
+                // the level, else (wrapped or clamped beyond an edge) the whole row.
+                let (cx0, cx1) = if r.x0 >= 0 && r.x1 <= l.w as i64 {
+                    (r.x0, r.x1)
+                } else {
+                    (0, l.w as i64)
+                };
+                let mut row: Vec<u8> = Vec::new();
+                let mut row_y = -1i64;
                 for y in 0..r.h() {
                     let sy = wrap(r.y0 + y, l.h as i64, src.wrap[1]);
+                    if sy != row_y {
+                        row = self.read_row(l, sy, cx0, cx1)?;
+                        row_y = sy;
+                    }
                     for x in 0..r.w() {
                         let sx = wrap(r.x0 + x, l.w as i64, src.wrap[0]);
-                        let o = ((sy * l.w as i64 + sx) * 4) as usize;
-                        let mut px = [l.rgba[o], l.rgba[o + 1], l.rgba[o + 2], l.rgba[o + 3]];
+                        let o = ((sx - cx0) * 4) as usize;
+                        let mut px = [row[o], row[o + 1], row[o + 2], row[o + 3]];
                         if tint != [255; 4] {
                             for c in 0..4 {
                                 px[c] = ((px[c] as u32 * tint[c] as u32 + 127) / 255) as u8;
@@ -808,10 +934,48 @@ mod tests {
     #[test]
     fn pyramid_levels_halve_and_average() {
         let rgba: Vec<u8> = (0..5 * 3).flat_map(|i| [i as u8 * 10, 0, 0, 255]).collect();
-        let p = Pyramid::new(5, 3, rgba);
-        let sizes: Vec<(u32, u32)> = p.levels.iter().map(|l| (l.w, l.h)).collect();
+        let mut stored: Vec<Vec<u8>> = Vec::new();
+        let levels = build_pyramid::<()>(Texels { w: 5, h: 3, rgba }, |l| {
+            let at = stored.iter().map(|b| b.len() as u64).sum();
+            stored.push(l.rgba.clone());
+            Ok(at)
+        })
+        .unwrap();
+        let sizes: Vec<(u32, u32)> = levels.iter().map(|l| (l.w, l.h)).collect();
         assert_eq!(sizes, vec![(5, 3), (3, 2), (2, 1), (1, 1)]);
+        assert_eq!(levels[1].offset, 5 * 3 * 4);
         // Texel (0,0) of level 1 = mean of source texels 0, 1, 5, 6 (red 0, 10, 50, 60).
-        assert_eq!(p.levels[1].rgba[0], 30);
+        assert_eq!(stored[1][0], 30);
+    }
+
+    #[test]
+    fn the_decode_gate_admits_what_fits_and_one_oversized_alone() {
+        // Why: concurrent decodes are the texture stage's memory; the gate must bound
+        // them without ever refusing an image larger than the whole budget.
+        let gate = DecodeGate {
+            budget: 100,
+            in_flight: Mutex::new(0),
+            freed: Condvar::new(),
+        };
+        let a = gate.enter(60);
+        let b = gate.enter(40);
+        assert_eq!(*gate.in_flight.lock().unwrap(), 100);
+        drop((a, b));
+        let big = gate.enter(500);
+        assert_eq!(*gate.in_flight.lock().unwrap(), 500);
+        let waited = std::sync::atomic::AtomicBool::new(false);
+        std::thread::scope(|s| {
+            s.spawn(|| {
+                let _t = gate.enter(10);
+                assert!(
+                    waited.load(Ordering::SeqCst),
+                    "entered beside an oversized decode"
+                );
+            });
+            std::thread::sleep(std::time::Duration::from_millis(50));
+            waited.store(true, Ordering::SeqCst);
+            drop(big);
+        });
+        assert_eq!(*gate.in_flight.lock().unwrap(), 0);
     }
 }

@@ -5,7 +5,9 @@ use anyhow::Context;
 use clap::Subcommand;
 use std::path::PathBuf;
 use std::process::ExitCode;
-use tessera_gen::{SphereOptions, TerrainOptions, TileOptions};
+use tessera_gen::{
+    ImageFormat, SphereOptions, TerrainOptions, TexturedOptions, TexturedReport, TileOptions,
+};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -54,6 +56,41 @@ enum What {
         #[arg(short, long)]
         quiet: bool,
     },
+    /// A terrain over K tiles, one procedural aerial photo per tile (OBJ + MTL + images).
+    ///
+    /// Writes OUTPUT (OBJ), its MTL beside it and the images NAME-tile-KK.jpg (or .png),
+    /// all atomically, images first and the OBJ last (an OBJ at the path means the rest
+    /// is there). Each tile's faces use their own material and image; UVs map a tile onto
+    /// its whole image, v = 0 at the bottom row (south). The photos follow the relief and
+    /// show the tile number. Deterministic: the same options write the same bytes.
+    Textured {
+        /// About how many triangles (e.g. 2M): each tile gets n x n cells of two
+        /// triangles, n = round(sqrt(N / 2K)).
+        #[arg(long, value_parser = parse_count)]
+        triangles: u64,
+        /// The tiles: a count K (laid out on the most square grid, e.g. 32 -> 8x4) or
+        /// COLSxROWS.
+        #[arg(long, default_value = "16", value_parser = parse_tiles)]
+        tiles: (u32, u32),
+        /// Side of each tile's image, texels.
+        #[arg(long, default_value_t = 4096, value_parser = clap::value_parser!(u32).range(8..=16384))]
+        image_size: u32,
+        /// Image format of the tiles.
+        #[arg(long, default_value = "jpeg", value_parser = ["jpeg", "png"])]
+        image_format: String,
+        /// JPEG quality of the tiles (1..=100).
+        #[arg(long, default_value_t = 90, value_parser = clap::value_parser!(u8).range(1..=100))]
+        quality: u8,
+        /// Output OBJ (e.g. out/terrain.obj); the MTL and images go beside it.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Seed of the relief and of the photos.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// No progress bar.
+        #[arg(short, long)]
+        quiet: bool,
+    },
     /// K copies of a real scan laid out in a grid, as one mesh.
     Tile {
         /// The scan to copy (PLY, OBJ or STL).
@@ -86,13 +123,68 @@ fn parse_count(s: &str) -> Result<u64, String> {
     Ok((n * mult).round() as u64)
 }
 
+/// Accepts `K` (the most square grid of K tiles) or `COLSxROWS` (e.g. `8x4`).
+fn parse_tiles(s: &str) -> Result<(u32, u32), String> {
+    let t = s.trim().to_ascii_lowercase();
+    let bad = || format!("not a tile count or COLSxROWS: {s:?}");
+    let (cols, rows) = match t.split_once('x') {
+        Some((c, r)) => (
+            c.trim().parse::<u32>().map_err(|_| bad())?,
+            r.trim().parse::<u32>().map_err(|_| bad())?,
+        ),
+        None => match t.parse::<u32>().map_err(|_| bad())? {
+            0 => (0, 0),
+            k => tessera_gen::tile_grid(k),
+        },
+    };
+    if cols == 0 || rows == 0 {
+        return Err(format!("need at least one tile: {s:?}"));
+    }
+    if u64::from(cols) * u64::from(rows) > 1 << 16 {
+        return Err(format!("at most 65536 tiles: {s:?}"));
+    }
+    Ok((cols, rows))
+}
+
 pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     let (quiet, output) = match &a.what {
         What::Sphere { quiet, output, .. }
         | What::Terrain { quiet, output, .. }
+        | What::Textured { quiet, output, .. }
         | What::Tile { quiet, output, .. } => (*quiet, output.clone()),
     };
     let bars = Bars::new(quiet);
+    if let What::Textured {
+        triangles,
+        tiles: (columns, rows),
+        image_size,
+        image_format,
+        quality,
+        seed,
+        ..
+    } = a.what
+    {
+        let image_format = if image_format == "png" {
+            ImageFormat::Png
+        } else {
+            ImageFormat::Jpeg { quality }
+        };
+        let r = tessera_gen::write_textured_terrain(
+            &output,
+            &TexturedOptions {
+                triangles,
+                columns,
+                rows,
+                image_size,
+                image_format,
+                seed,
+            },
+            &bars,
+        )
+        .with_context(|| format!("generating {}", output.display()))?;
+        print_textured(&r, image_size, image_format);
+        return Ok(ExitCode::SUCCESS);
+    }
     let report = match a.what {
         What::Sphere {
             triangles,
@@ -127,6 +219,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         What::Tile { input, copies, .. } => {
             tessera_gen::write_tiled(&input, &output, &TileOptions { copies }, &bars)
         }
+        What::Textured { .. } => unreachable!("handled above"),
     }
     .with_context(|| format!("generating {}", output.display()))?;
     println!(
@@ -138,6 +231,49 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
+fn print_textured(r: &TexturedReport, size: u32, format: ImageFormat) {
+    let name = |p: &std::path::Path| {
+        p.file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default()
+    };
+    let mib = |b: u64| b as f64 / (1u64 << 20) as f64;
+    println!(
+        "wrote {}: {} triangles, {} positions, {} uvs ({} tiles of {}x{} cells), {:.1} MiB",
+        r.obj.display(),
+        r.mesh.triangles,
+        r.mesh.vertices,
+        r.uvs,
+        r.images.len(),
+        r.cells_per_tile,
+        r.cells_per_tile,
+        mib(r.obj_bytes)
+    );
+    println!("wrote {}: {} materials", r.mtl.display(), r.images.len());
+    let range = match (r.images.first(), r.images.last()) {
+        (Some(a), Some(b)) if r.images.len() > 1 => format!("{} .. {}", name(a), name(b)),
+        (Some(a), _) => name(a),
+        _ => String::new(),
+    };
+    let codec = match format {
+        ImageFormat::Jpeg { quality } => format!("JPEG q{quality}"),
+        ImageFormat::Png => "PNG".into(),
+    };
+    println!(
+        "wrote {} images {range}: {size}x{size} {codec}, {:.1} MiB on disk",
+        r.images.len(),
+        mib(r.image_bytes)
+    );
+    println!(
+        "source texels: {} ({:.1} Mtexels), {} bytes decoded as RGBA8 ({:.2} GiB, {:.2} GB)",
+        r.texels,
+        r.texels as f64 / 1e6,
+        r.decoded_bytes,
+        r.decoded_bytes as f64 / (1u64 << 30) as f64,
+        r.decoded_bytes as f64 / 1e9
+    );
+}
+
 #[cfg(test)]
 mod tests {
     #[test]
@@ -147,5 +283,16 @@ mod tests {
         assert_eq!(super::parse_count("2500"), Ok(2500));
         assert!(super::parse_count("0").is_err());
         assert!(super::parse_count("abc").is_err());
+    }
+
+    #[test]
+    fn tiles_parse() {
+        assert_eq!(super::parse_tiles("32"), Ok((8, 4)));
+        assert_eq!(super::parse_tiles("3x5"), Ok((3, 5)));
+        assert_eq!(super::parse_tiles("1"), Ok((1, 1)));
+        assert!(super::parse_tiles("0").is_err());
+        assert!(super::parse_tiles("0x4").is_err());
+        assert!(super::parse_tiles("4x").is_err());
+        assert!(super::parse_tiles("300x300").is_err());
     }
 }

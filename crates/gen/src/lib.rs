@@ -1,4 +1,5 @@
-//! Deterministic, streamed generators of large test meshes, written as binary PLY.
+//! Deterministic, streamed generators of large test meshes, written as binary PLY (the
+//! textured terrain as OBJ + MTL + images).
 //!
 //! The out-of-core builder needs inputs from 10^3 to 10^9 triangles for tests and
 //! benchmarks. The generators here never hold the mesh: vertices are computed on the fly
@@ -12,17 +13,26 @@
 //! * [`write_sphere`]: a watertight, consistently oriented, bumpy closed 2-manifold.
 //! * [`write_terrain`]: an open heightfield with a boundary.
 //! * [`write_tiled`]: K translated copies of a real (small) scan.
+//! * [`write_textured_terrain`]: a terrain over K tiles, OBJ + MTL + one procedural
+//!   aerial photo (JPEG or PNG) per tile: source images of any total size for the
+//!   builder's texture stage.
 //!
 //! Each reports one `generate` stage to the [`Progress`] it is given ([`NoProgress`] for
-//! none), the same protocol as the builder's (`tessera-mesh`'s trait).
+//! none; the textured terrain an `images` stage before it), the same protocol as the
+//! builder's (`tessera-mesh`'s trait).
 
 mod noise;
 mod sphere;
 mod terrain;
+mod textured;
 mod tile;
 
 pub use sphere::{sphere_resolution, write_sphere, SphereOptions};
 pub use terrain::{terrain_resolution, write_terrain, TerrainOptions, MAX_HEIGHT, MIN_HEIGHT};
+pub use textured::{
+    textured_paths, textured_resolution, tile_grid, write_textured_terrain, ImageFormat,
+    TexturedOptions, TexturedReport,
+};
 pub use tile::{write_tiled, TileOptions};
 
 use tessera_mesh::MeshError;
@@ -46,6 +56,12 @@ pub enum GenError {
     /// The options are out of range (too few or too many triangles, bad amplitude, ...).
     #[error("invalid argument: {0}")]
     InvalidArgument(String),
+    /// An image could not be encoded (names the file).
+    #[error("{}: {message}", path.display())]
+    Encode {
+        path: std::path::PathBuf,
+        message: String,
+    },
 }
 
 /// Elements (vertices or triangles) between two progress reports.

@@ -81,15 +81,7 @@ pub fn write_terrain(
     let vertex_count = m * m;
     let face_count = 2 * cells * cells;
 
-    // Finest octave's cell at least ~4 vertex spacings: 4 * 2^(k-1) <= (m - 1) / 4.
-    let mut octaves = 1u32;
-    while octaves < 12 && (16u64 << octaves) <= cells {
-        octaves += 1;
-    }
-    let height = Height {
-        fbm: Fbm::new(opts.seed, 11, octaves.max(2), 4.0),
-        ridges: Fbm::new(opts.seed, 12, 3, 2.0),
-    };
+    let height = Height::new(opts.seed, cells);
 
     let writer_opts = PlyWriterOptions {
         attributes: Attributes {
@@ -148,14 +140,28 @@ pub fn write_terrain(
     })
 }
 
-struct Height {
+/// The relief: `z` at `(x, y)` (model units of the unit square; defined everywhere).
+pub(crate) struct Height {
     fbm: Fbm,
     ridges: Fbm,
 }
 
 impl Height {
+    /// The relief of seed `seed` sampled by a grid of `cells` cells per unit length: the
+    /// finest octave's cell spans at least ~4 grid steps (`4 * 2^(k-1) <= cells / 4`).
+    pub(crate) fn new(seed: u64, cells: u64) -> Height {
+        let mut octaves = 1u32;
+        while octaves < 12 && (16u64 << octaves) <= cells {
+            octaves += 1;
+        }
+        Height {
+            fbm: Fbm::new(seed, 11, octaves.max(2), 4.0),
+            ridges: Fbm::new(seed, 12, 3, 2.0),
+        }
+    }
+
     #[inline]
-    fn at(&self, x: f64, y: f64) -> f64 {
+    pub(crate) fn at(&self, x: f64, y: f64) -> f64 {
         let base = FBM_AMPLITUDE * self.fbm.sample([x, y, 0.0]);
         let r = self.ridges.ridged([x, y, 0.5]);
         // Squaring sharpens the crests and flattens the valleys between them.
