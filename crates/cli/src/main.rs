@@ -39,7 +39,7 @@ enum Command {
     Verify(cmd_verify::Args),
     /// Select a cut of the hierarchy and write it as one mesh (PLY, glTF or GLB).
     Extract(cmd_extract::Args),
-    /// Generate deterministic test meshes (binary PLY).
+    /// Generate deterministic test meshes (binary PLY; OBJ + MTL + images for `textured`).
     Gen(cmd_gen::Args),
     /// Render a camera path or an orbit to PNG frames with per-frame statistics.
     Render(cmd_render::Args),
