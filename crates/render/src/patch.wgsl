@@ -53,6 +53,18 @@ fn oct_decode(e: vec2<f32>) -> vec3<f32> {
     return normalize(vec3<f32>(e - s * t, z));
 }
 
+// The morphed vertex in clip space, and its morphed (unnormalised) normal: shared by
+// both vertex entry points.
+fn morph_clip(position: vec3<f32>, target_pos: vec3<f32>, r: f32) -> vec4<f32> {
+    let p = position + (target_pos - position) * r;
+    return frame.view_proj * vec4<f32>(p, 1.0);
+}
+
+fn morph_normal(normal: vec2<f32>, target_normal: vec2<f32>, r: f32) -> vec3<f32> {
+    let n0 = oct_decode(normal);
+    return n0 + (oct_decode(target_normal) - n0) * r;
+}
+
 struct VertexOut {
     @builtin(position) clip: vec4<f32>,
     @location(0) normal: vec3<f32>,
@@ -63,10 +75,8 @@ struct VertexOut {
 fn vs_main(v: VertexIn) -> VertexOut {
     var out: VertexOut;
     let r = v.ratio;
-    let p = v.position + (v.target_pos - v.position) * r;
-    out.clip = frame.view_proj * vec4<f32>(p, 1.0);
-    let n0 = oct_decode(v.normal);
-    out.normal = n0 + (oct_decode(v.target_normal) - n0) * r;
+    out.clip = morph_clip(v.position, v.target_pos, r);
+    out.normal = morph_normal(v.normal, v.target_normal, r);
     let c = v.color + (v.target_color - v.color) * r;
     let natural = select(frame.clay.rgb, c.rgb, frame.sky_up_has_color.w > 0.5);
     out.color = mode_color(natural, v.tag);
@@ -138,10 +148,8 @@ struct TexturedOut {
 fn vs_textured(v: TexturedIn) -> TexturedOut {
     var out: TexturedOut;
     let r = v.ratio;
-    let p = v.position + (v.target_pos - v.position) * r;
-    out.clip = frame.view_proj * vec4<f32>(p, 1.0);
-    let n0 = oct_decode(v.normal);
-    out.normal = n0 + (oct_decode(v.target_normal) - n0) * r;
+    out.clip = morph_clip(v.position, v.target_pos, r);
+    out.normal = morph_normal(v.normal, v.target_normal, r);
     out.uv = v.uv + (v.target_uv - v.uv) * r;
     out.color = mode_color(frame.clay.rgb, v.tag);
     return out;
