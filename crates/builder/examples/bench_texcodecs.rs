@@ -31,6 +31,11 @@
 
 use std::time::Instant;
 
+// intel_tex_2's ISPC kernels are C++ objects: unoptimised builds keep their references to
+// the C++ runtime (`__gxx_personality_v0`), which Rust does not link by itself.
+#[link(name = "stdc++")]
+extern "C" {}
+
 /// An RGBA8 image, rows top to bottom.
 struct Image {
     w: u32,
