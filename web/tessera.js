@@ -17,7 +17,12 @@
 //   v.camera();     // the current camera (sized as the canvas)
 //   await v.screenshot();  // a PNG Blob of the view at the canvas's pixel size
 //   await v.pointAt(x, y);  // the point drawn under canvas pixel (x, y), or null
-//   v.dispose();    // stops the frame loop, frees the GPU and wasm memory
+//   v.dispose();    // stops the frame loop, frees the GPU and wasm memory (and the
+//                   // decode workers, with the page's last view)
+//
+// Fetched patches are decoded (and textures' mips made) in decode workers
+// (tessera_worker.js beside this file: module workers running the same wasm module),
+// shared by every view on the page; `workers: 0` decodes on the main thread instead.
 //
 // Tessera.view rejects with an Error whose message is meant for the page (no WebGL2, a
 // 404 model, a server without Range support, a model of a newer format version).
@@ -30,12 +35,148 @@
 import init, { Viewer } from './tessera_web.js';
 
 let wasmReady = null;
+let wasmModule = null;
+let wasmMemory = null;
+
+// The module compiled once: instantiated here and, the same compiled module, in each
+// decode worker (no second download or compile).
+async function compileWasm(url) {
+  const resp = await fetch(url);
+  if (!resp.ok) throw new Error(`cannot load ${url}: HTTP ${resp.status}`);
+  if (typeof WebAssembly.compileStreaming === 'function') {
+    try {
+      return await WebAssembly.compileStreaming(resp.clone());
+    } catch (_) {
+      // Served without the application/wasm type: compiled from the bytes instead.
+    }
+  }
+  return WebAssembly.compile(await resp.arrayBuffer());
+}
 
 function loadWasm() {
   if (!wasmReady) {
-    wasmReady = init({ module_or_path: new URL('./tessera_web_bg.wasm', import.meta.url) });
+    wasmReady = (async () => {
+      const module = await compileWasm(new URL('./tessera_web_bg.wasm', import.meta.url));
+      const wasm = await init({ module_or_path: module });
+      wasmModule = module;
+      wasmMemory = wasm.memory;
+    })();
+    wasmReady.catch(() => {
+      wasmReady = null;
+    });
   }
   return wasmReady;
+}
+
+/** Decode workers the page starts by default: the cores but one, 1 to 4. */
+export function defaultWorkers() {
+  const cores = (typeof navigator !== 'undefined' && navigator.hardwareConcurrency) || 2;
+  return Math.min(4, Math.max(1, cores - 1));
+}
+
+// The page's decode workers (tessera_worker.js, module workers running the same wasm
+// module), shared by every view on the page and stopped when the last is disposed.
+// Each job goes to the worker with the fewest; a worker that fails to start or dies
+// rejects its jobs, and the viewer then decodes on the main thread.
+class DecodePool {
+  #workers = [];
+  #jobs = new Map();
+  #next = 1;
+  users = 0;
+  failure = null;
+
+  constructor(module, size) {
+    for (let i = 0; i < size; i++) {
+      let worker;
+      try {
+        worker = new Worker(new URL('./tessera_worker.js', import.meta.url), { type: 'module' });
+      } catch (e) {
+        this.failure = `decode workers cannot start here: ${(e && e.message) || e}`;
+        break;
+      }
+      const entry = { worker, jobs: 0, heap: 0, dead: false };
+      worker.onmessage = (e) => this.#message(entry, e.data);
+      worker.onerror = (e) => {
+        if (e && e.preventDefault) e.preventDefault();
+        this.#die(entry, (e && e.message) || 'a decode worker failed to load');
+      };
+      worker.postMessage({ module });
+      this.#workers.push(entry);
+    }
+  }
+
+  /** Workers running. */
+  get size() {
+    return this.#workers.filter((w) => !w.dead).length;
+  }
+
+  /** The workers' wasm memory, bytes (as each last reported it). */
+  get heapBytes() {
+    return this.#workers.reduce((sum, w) => sum + (w.dead ? 0 : w.heap), 0);
+  }
+
+  /** A promise of the reply (Uint8Array) to `job` (a Uint8Array, its buffer moved). */
+  decode(job) {
+    const live = this.#workers.filter((w) => !w.dead);
+    if (!live.length) return Promise.reject(new Error(this.failure || 'no decode workers'));
+    const entry = live.reduce((a, b) => (b.jobs < a.jobs ? b : a));
+    const id = this.#next++;
+    return new Promise((resolve, reject) => {
+      this.#jobs.set(id, { resolve, reject, entry });
+      entry.jobs++;
+      entry.worker.postMessage({ id, job }, [job.buffer]);
+    });
+  }
+
+  #message(entry, m) {
+    if (m.ready) return;
+    if (m.initError) {
+      this.#die(entry, `a decode worker could not start: ${m.initError}`);
+      return;
+    }
+    const job = this.#jobs.get(m.id);
+    if (!job) return;
+    this.#jobs.delete(m.id);
+    entry.jobs--;
+    if (m.heap) entry.heap = m.heap;
+    if (m.reply) job.resolve(m.reply);
+    else job.reject(new Error(m.error));
+  }
+
+  #die(entry, message) {
+    if (entry.dead) return;
+    entry.dead = true;
+    this.failure = message;
+    entry.worker.terminate();
+    for (const [id, job] of this.#jobs) {
+      if (job.entry === entry) {
+        this.#jobs.delete(id);
+        job.reject(new Error(message));
+      }
+    }
+  }
+
+  terminate() {
+    for (const entry of this.#workers) this.#die(entry, 'the decode workers were stopped');
+  }
+}
+
+let pool = null;
+
+function acquirePool(size) {
+  if (size <= 0 || typeof Worker === 'undefined' || !wasmModule) return null;
+  if (!pool) pool = new DecodePool(wasmModule, size);
+  pool.users++;
+  return pool;
+}
+
+function releasePool(p) {
+  if (!p) return;
+  p.users--;
+  if (p.users <= 0) {
+    p.terminate();
+    if (pool === p) pool = null;
+  }
 }
 
 /** Whether this browser gives a WebGL2 context (tried on a canvas of its own). */
@@ -83,9 +224,12 @@ export class View extends EventTarget {
   #warning = null;
   #url;
 
-  constructor(viewer, canvas, autoResize, url = '') {
+  #pool = null;
+
+  constructor(viewer, canvas, autoResize, url = '', pool = null) {
     super();
     this.#url = url;
+    this.#pool = pool;
     this.#viewer = viewer;
     this.#canvas = canvas;
     this.#bindInput();
@@ -184,6 +328,8 @@ export class View extends EventTarget {
     if (this.#resizeObserver) this.#resizeObserver.disconnect();
     this.#viewer.free();
     this.#viewer = null;
+    releasePool(this.#pool);
+    this.#pool = null;
     for (const s of this.#shots.splice(0)) s.reject(new Error('screenshot: the view was disposed'));
     for (const resolve of this.#pointQueries.values()) resolve(null);
     this.#pointQueries.clear();
@@ -376,6 +522,9 @@ export class View extends EventTarget {
     }
     while (this.#frameTimes.length && this.#frameTimes[0] < t - 1000) this.#frameTimes.shift();
     stats.fps = this.#frameTimes.length;
+    // The page's wasm memory (every view's), and the decode workers'.
+    stats.wasm_heap_bytes = wasmMemory ? wasmMemory.buffer.byteLength : 0;
+    stats.worker_heap_bytes = this.#pool ? this.#pool.heapBytes : 0;
     for (const { id, point } of stats.picks || []) {
       const resolve = this.#pointQueries.get(id);
       this.#pointQueries.delete(id);
@@ -409,11 +558,14 @@ export const Tessera = {
    * request, default 64 KiB: the header and the top of the index of most models),
    * maxTextureDim (default null: the device's own; a number makes the device's largest
    * texture that, at least the canvas's size, as on a smaller GPU: textured models'
-   * larger patch textures are then uploaded from their first mip that fits).
+   * larger patch textures are then uploaded from their first mip that fits),
+   * workers (decode workers, default defaultWorkers(): the cores but one, 1 to 4,
+   * shared by every view on the page; 0 decodes on the main thread, at most 6 ms a
+   * frame).
    */
   async view(
     canvas,
-    { url, tolerancePx = 1, memoryBytes = 512 * 1048576, camera = null, autoResize = true, prefixBytes = 65536, maxTextureDim = null } = {},
+    { url, tolerancePx = 1, memoryBytes = 512 * 1048576, camera = null, autoResize = true, prefixBytes = 65536, maxTextureDim = null, workers = defaultWorkers() } = {},
   ) {
     if (!url) throw new Error('Tessera.view: no model URL given');
     if (!hasWebGL2()) {
@@ -436,7 +588,9 @@ export const Tessera = {
       camera: camera == null ? null : typeof camera === 'string' ? JSON.parse(camera) : camera,
     });
     const viewer = await Viewer.open(canvas, abs, options);
-    return new View(viewer, canvas, autoResize, abs);
+    const p = acquirePool(workers);
+    if (p) viewer.set_decoder((job) => p.decode(job), p.size);
+    return new View(viewer, canvas, autoResize, abs, p);
   },
 };
 

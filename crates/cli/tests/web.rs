@@ -70,6 +70,7 @@ fn dist() -> PathBuf {
     for f in [
         "index.html",
         "tessera.js",
+        "tessera_worker.js",
         "tessera_web.js",
         "tessera_web_bg.wasm",
     ] {
@@ -79,7 +80,7 @@ fn dist() -> PathBuf {
             d.join(f).display()
         );
     }
-    for f in ["index.html", "embed.html", "tessera.js"] {
+    for f in ["index.html", "embed.html", "tessera.js", "tessera_worker.js"] {
         let src = std::fs::read(repo().join("web").join(f)).unwrap();
         assert!(
             std::fs::read(d.join(f)).unwrap() == src,
@@ -1385,10 +1386,11 @@ fn the_page_draws_a_textured_scan_as_tessera_render() {
     let camera = format!(r#"{SCISSORS_CAMERA}, "width": {WIDTH}, "height": {HEIGHT}}}"#);
     let hash = format!("#camera={}", encode(&camera));
     let base = format!("http://{addr}");
-    let (textured_png, small_png, plain_png) = (
+    let (textured_png, small_png, plain_png, main_png) = (
         dir.join("textured.png"),
         dir.join("small.png"),
         dir.join("plain.png"),
+        dir.join("main-thread.png"),
     );
     let results = browse_alone(
         json!([
@@ -1398,6 +1400,8 @@ fn the_page_draws_a_textured_scan_as_tessera_render() {
              "expect": "idle", "screenshot": small_png, "timeout_ms": 240000, "viewport": [800, 480]},
             {"name": "untextured", "url": format!("{base}/?model=/models/plain.tsr{hash}"),
              "expect": "idle", "screenshot": plain_png, "timeout_ms": 240000, "viewport": [800, 480]},
+            {"name": "main-thread", "url": format!("{base}/?model=/models/scissors.tsr&workers=0{hash}"),
+             "expect": "idle", "screenshot": main_png, "timeout_ms": 240000, "viewport": [800, 480]},
         ]),
         &[],
         dir,
@@ -1405,7 +1409,7 @@ fn the_page_draws_a_textured_scan_as_tessera_render() {
     for r in &results {
         let s = &r["stats"];
         eprintln!(
-            "{}: {} in {} ms; {} triangles, {} nodes, level {}, {} bytes in {} requests, converged {} ms after open; decode {:.1} ms/patch mean ({} patches, {:.1} max, {:.0} total); uploads {} ({} textured, {:.1} ms mean, {:.1} max); GPU {} bytes of which textures {}; max texture {} (adapter {}); largest drawn texture {}; HUD {:?}",
+            "{}: {} in {} ms; {} triangles, {} nodes, level {}, {} bytes in {} requests, converged {} ms after open; {} decode workers: {} patches, {:.1} ms mean, {} bytes of worker heap; replies taken in {:.1} ms mean, {:.1} max; main thread: decode {:.1} ms/patch mean ({} patches in all, {:.1} max, {:.0} total); uploads {} ({} textured, {:.1} ms mean, {:.1} max); GPU {} bytes of which textures {}; max texture {} (adapter {}); largest drawn texture {}; HUD {:?}",
             r["name"],
             r["outcome"],
             r["ms"],
@@ -1415,6 +1419,12 @@ fn the_page_draws_a_textured_scan_as_tessera_render() {
             s["bytes_received"],
             s["requests"],
             s["converged_ms"],
+            s["decode_workers"],
+            s["worker_decoded"],
+            s["worker_decode_ms_mean"].as_f64().unwrap_or(0.0),
+            s["worker_heap_bytes"],
+            s["reply_ms_mean"].as_f64().unwrap_or(0.0),
+            s["reply_ms_max"].as_f64().unwrap_or(0.0),
             s["decode_ms_mean"].as_f64().unwrap_or(0.0),
             s["decoded"],
             s["decode_ms_max"].as_f64().unwrap_or(0.0),
@@ -1431,12 +1441,13 @@ fn the_page_draws_a_textured_scan_as_tessera_render() {
             r["hud"],
         );
     }
-    let (t, small, u) = (
+    let (t, small, u, main) = (
         result(&results, "textured"),
         result(&results, "max-2048"),
         result(&results, "untextured"),
+        result(&results, "main-thread"),
     );
-    for r in [t, small, u] {
+    for r in [t, small, u, main] {
         assert_eq!(r["outcome"], "idle", "{r:#}");
         assert_eq!(r["stats"]["pending"], 0, "{r:#}");
         assert_eq!(r["stats"]["failed_patches"], 0, "{r:#}");
@@ -1445,9 +1456,37 @@ fn the_page_draws_a_textured_scan_as_tessera_render() {
             "did not refine past the roots: {r:#}"
         );
     }
-    let (ts, ss, us) = (&t["stats"], &small["stats"], &u["stats"]);
+    let (ts, ss, us, ms) = (&t["stats"], &small["stats"], &u["stats"], &main["stats"]);
     assert_eq!(ts["textured"], true, "{ts:#}");
     assert_eq!(us["textured"], false, "{us:#}");
+
+    // Decoding: in the decode workers by default (every patch after the roots, which
+    // are decoded while opening), on the main thread with ?workers=0; the same cut and the
+    // same pixels either way (the workers' mips are the upload's).
+    for s in [ts, ss, us] {
+        assert!(s["decode_workers"].as_u64().unwrap() >= 1, "{s:#}");
+        assert_eq!(s["workers_failed"], false, "{s:#}");
+        let (all, workers) = (
+            s["decoded"].as_u64().unwrap(),
+            s["worker_decoded"].as_u64().unwrap(),
+        );
+        assert!(workers > 0, "no patch decoded by a worker: {s:#}");
+        assert_eq!(all, workers, "decoded on the main thread: {s:#}");
+        assert!(s["worker_heap_bytes"].as_u64().unwrap() > 0, "{s:#}");
+    }
+    assert_eq!(ms["decode_workers"], 0, "{ms:#}");
+    assert_eq!(ms["worker_decoded"], 0, "{ms:#}");
+    assert_eq!(
+        ms["triangles"], ts["triangles"],
+        "another cut decoding on the main thread"
+    );
+    let main_thread = Image::load_png(&main_png).unwrap();
+    let same_pixels =
+        psnr(&main_thread, &Image::load_png(&textured_png).unwrap()).unwrap_or(f64::INFINITY);
+    assert!(
+        same_pixels >= 60.0,
+        "decoding in workers changed the picture: {same_pixels:.2} dB against the main thread's"
+    );
 
     // The pixels: the textured page against tessera render of the same camera, and the
     // untextured scan's page against the same render (the negative control).

@@ -329,8 +329,8 @@ const INITIAL_BUFFER_BYTES: u64 = 8 << 20;
 /// draw the same either way; a small budget's buffers just grow on demand.)
 const INITIAL_SHARE: u32 = 8;
 
-/// A patch texture's texels: width, height, RGBA8.
-type TexelsRef<'p> = (u32, u32, &'p [u8]);
+/// A patch texture's texels: width, height, RGBA8, the mips made ahead (or none).
+type TexelsRef<'p> = (u32, u32, &'p [u8], &'p [Vec<u8>]);
 
 /// One growable GPU buffer carved into element ranges (vertices or indices).
 struct Pool {
@@ -508,7 +508,7 @@ impl GpuCache {
                     && t.rgba.len() as u64 == 4 * u64::from(t.width) * u64::from(t.height) =>
             {
                 let bytes = texture_gpu_bytes(t.width, t.height, self.max_texture_dim);
-                (bytes, Some((t.width, t.height, &t.rgba[..])))
+                (bytes, Some((t.width, t.height, &t.rgba[..], &t.mips[..])))
             }
             _ => (0, None),
         }
@@ -814,7 +814,9 @@ impl GpuCache {
                 .kit
                 .get_or_insert_with(|| TextureKit::new(device, queue));
             Some(match texels {
-                Some((w, h, rgba)) => kit.upload(device, queue, w, h, rgba, self.max_texture_dim),
+                Some((w, h, rgba, mips)) => {
+                    kit.upload(device, queue, w, h, rgba, mips, self.max_texture_dim)
+                }
                 None => kit.grey(),
             })
         } else {

@@ -107,6 +107,30 @@ pub fn downsample(src: &[u8], w: u32, h: u32) -> (Vec<u8>, u32, u32) {
     (out, dw, dh)
 }
 
+/// Mip levels 1, 2, .. (down to 1x1) of `rgba` (`width` x `height`), each
+/// [`downsample`] of the last: what [`TextureKit::upload`] makes when it is not given
+/// them.
+pub fn mip_chain(rgba: &[u8], width: u32, height: u32) -> Vec<Vec<u8>> {
+    let mut out: Vec<Vec<u8>> = Vec::new();
+    let (mut w, mut h) = (width, height);
+    for _ in 1..mip_level_count(width, height) {
+        let (next, nw, nh) = downsample(out.last().map_or(rgba, |v| &v[..]), w, h);
+        out.push(next);
+        (w, h) = (nw, nh);
+    }
+    out
+}
+
+/// Whether `mips` are the whole chain below a `width` x `height` level 0, each of its
+/// level's size.
+fn mips_fit(width: u32, height: u32, mips: &[Vec<u8>]) -> bool {
+    mips.len() as u32 + 1 == mip_level_count(width, height)
+        && mips.iter().enumerate().all(|(i, m)| {
+            let (w, h) = level_size(width, height, i as u32 + 1);
+            m.len() as u64 == 4 * u64::from(w) * u64::from(h)
+        })
+}
+
 /// The bind group layout of a patch texture (group 1 of the textured pipeline): the
 /// texture at binding 0, its sampler at binding 1.
 pub fn texture_bind_group_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
@@ -173,7 +197,7 @@ impl TextureKit {
             sampler,
             grey: None,
         };
-        let mut grey = kit.upload(device, queue, 1, 1, &[128, 128, 128, 255], 1 << 14);
+        let mut grey = kit.upload(device, queue, 1, 1, &[128, 128, 128, 255], &[], 1 << 14);
         grey.bytes = 0;
         kit.grey = Some(grey);
         kit
@@ -203,7 +227,10 @@ impl TextureKit {
     }
 
     /// Uploads `rgba` (`width` x `height`, rows top to bottom, `4 * width * height`
-    /// bytes) with its mip chain, from the first level that fits `max_dim`.
+    /// bytes) with its mip chain, from the first level that fits `max_dim`. `mips` are
+    /// levels 1.. when made ahead ([`mip_chain`], the browser's decode workers); when
+    /// they are not the whole chain of the right sizes they are made here.
+    #[allow(clippy::too_many_arguments)]
     pub fn upload(
         &self,
         device: &wgpu::Device,
@@ -211,19 +238,26 @@ impl TextureKit {
         width: u32,
         height: u32,
         rgba: &[u8],
+        mips: &[Vec<u8>],
         max_dim: u32,
     ) -> SlotTexture {
         let first = first_level(width, height, max_dim);
         let levels = mip_level_count(width, height);
         let (w0, h0) = level_size(width, height, first);
         let texture = Self::create(device, w0, h0, levels - first);
+        let made = mips_fit(width, height, mips);
         let mut level: std::borrow::Cow<[u8]> = std::borrow::Cow::Borrowed(rgba);
         let (mut w, mut h) = (width, height);
         let mut bytes = 0;
         for l in 0..levels {
             if l > 0 {
-                let (next, nw, nh) = downsample(&level, w, h);
-                (level, w, h) = (std::borrow::Cow::Owned(next), nw, nh);
+                if made {
+                    level = std::borrow::Cow::Borrowed(&mips[l as usize - 1]);
+                    (w, h) = level_size(width, height, l);
+                } else {
+                    let (next, nw, nh) = downsample(&level, w, h);
+                    (level, w, h) = (std::borrow::Cow::Owned(next), nw, nh);
+                }
             }
             if l < first {
                 continue;
@@ -319,5 +353,23 @@ mod tests {
         // (10 + 20) * 0.4 + 30 * 0.2 and 30 * 0.2 + (40 + 50) * 0.4.
         assert_eq!(d[0], 18);
         assert_eq!(d[4], 42);
+    }
+
+    #[test]
+    fn mip_chain_is_the_upload_chain() {
+        // 5x3: levels 2x1, 1x1, each the downsample of the last.
+        let src: Vec<u8> = (0..5 * 3 * 4).map(|i| (i * 7 % 251) as u8).collect();
+        let chain = mip_chain(&src, 5, 3);
+        assert_eq!(chain.len(), 2);
+        let (l1, w1, h1) = downsample(&src, 5, 3);
+        assert_eq!((w1, h1), (2, 1));
+        assert_eq!(chain[0], l1);
+        assert_eq!(chain[1], downsample(&l1, 2, 1).0);
+        assert!(mips_fit(5, 3, &chain));
+        // Anything else is made again at upload.
+        assert!(!mips_fit(5, 3, &chain[..1]));
+        assert!(!mips_fit(5, 3, &[chain[0].clone(), vec![0; 8]]));
+        assert!(mips_fit(1, 1, &[]));
+        assert!(mip_chain(&[1, 2, 3, 4], 1, 1).is_empty());
     }
 }

@@ -577,6 +577,7 @@ mod tests {
                 codec: None,
                 encoded: Vec::new(),
                 rgba: vec![shade, 0, 0, 255, 0, shade, 0, 255],
+                mips: Vec::new(),
             }),
             ..PatchData::default()
         };

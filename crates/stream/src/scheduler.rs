@@ -1434,10 +1434,9 @@ fn group_failed(groups: &Groups, failed: &FxHashSet<u32>, g: u32) -> bool {
 /// budget counts.
 pub fn decoded_bytes(p: &PatchData) -> u64 {
     use std::mem::size_of;
-    let texture = p
-        .texture
-        .as_ref()
-        .map_or(0, |t| t.rgba.len() + t.encoded.len());
+    let texture = p.texture.as_ref().map_or(0, |t| {
+        t.rgba.len() + t.encoded.len() + t.mips.iter().map(Vec::len).sum::<usize>()
+    });
     (p.positions.len() * size_of::<[u32; 3]>()
         + p.normals.len() * size_of::<[f32; 3]>()
         + p.colors.len() * size_of::<[u8; 4]>()

@@ -16,19 +16,27 @@
 //!   (a one-pixel pass packing the depth's bits into RGBA8), for zoom to the cursor,
 //!   double-click recentre and pinch about the fingers.
 //!
-//! Decoding runs on the main thread between frames in this first step (at most
-//! 6 ms of it per frame; the cost per patch is in the frame statistics); fetching is
-//! asynchronous and never blocks a frame. A web worker for decoding is next.
+//! - [`wire`]: the messages to and from the decode workers (a job: a fetched patch and
+//!   what decoding it needs from its node record; a reply: the decoded patch, its
+//!   texture's mips included, flattened into one transferable buffer). Plain Rust,
+//!   tested natively.
+//! - `worker` (wasm32): `decode_job`, what each worker (`web/tessera_worker.js`, the
+//!   same wasm module) runs.
 //!
-//! Textured models (format version 3, a texture per patch) decode their PNG/JPEG
-//! textures in the same place (`tessera_format::decode_patch`, the `image` crate in
-//! wasm) and the GPU cache makes each texture's mips on upload, on the main thread too:
-//! both are timed in the frame statistics (`decode_ms_*`, `textured_upload_ms_mean`,
-//! `upload_ms_max`). Measured on the YCB scissors in headless Chromium: about 25 ms a
-//! patch to decode and as much to upload on average, 0.2-0.26 s and 0.36-0.49 s for its
-//! largest texture (2435x3993), so one patch can hold a frame up for most of a second.
+//! Fetching is asynchronous and never blocks a frame. Decoding (zstd, the attribute
+//! streams, PNG/JPEG textures) and the textures' mip chains run in the page's decode
+//! workers (`Viewer::set_decoder`; `web/tessera.js` starts them); the main thread only
+//! copies the reply into the GPU cache. Without workers (`workers: 0`, or a browser
+//! where they fail), patches are decoded on the main thread between frames, at most
+//! 6 ms of it a frame, and the cache makes the mips at upload. Both paths are timed in
+//! the frame statistics (`worker_decode_ms_mean`, `decode_ms_*`,
+//! `textured_upload_ms_mean`, `upload_ms_max`).
+
+// The frame statistics' `json!` object is larger than the macro's default depth.
+#![recursion_limit = "256"]
 
 pub mod plan;
+pub mod wire;
 
 #[cfg(target_arch = "wasm32")]
 mod http;
@@ -36,6 +44,8 @@ mod http;
 mod pick;
 #[cfg(target_arch = "wasm32")]
 mod viewer;
+#[cfg(target_arch = "wasm32")]
+mod worker;
 
 #[cfg(target_arch = "wasm32")]
 pub use viewer::Viewer;

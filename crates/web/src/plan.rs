@@ -181,6 +181,14 @@ pub struct FetchStats {
     pub decode_max_ms: f64,
     /// Requests that failed (network, HTTP status): their nodes answered unavailable.
     pub failed_requests: u64,
+    /// Of `decoded`, the patches decoded by workers ([`Fetcher::take_jobs`]), and the
+    /// workers' time (milliseconds, off the main thread; their mips included).
+    pub worker_decoded: u64,
+    pub worker_ms: f64,
+    /// Main-thread milliseconds taking the workers' replies in (copying them into
+    /// the decoded patches), all and the largest.
+    pub reply_ms: f64,
+    pub reply_max_ms: f64,
 }
 
 /// The patch requests of one model. See the module docs.
@@ -197,6 +205,8 @@ pub struct Fetcher {
     settled: Vec<Answer>,
     /// Nodes failed for good ([`Fetcher::fail`]).
     gone: FxHashSet<u32>,
+    /// Patches handed to decode workers and not answered yet.
+    at_workers: usize,
     next_id: u64,
     stats: FetchStats,
 }
@@ -214,6 +224,7 @@ impl Fetcher {
             ready: VecDeque::new(),
             settled: Vec::new(),
             gone: FxHashSet::default(),
+            at_workers: 0,
             next_id: 0,
             stats: FetchStats::default(),
         }
@@ -265,9 +276,78 @@ impl Fetcher {
         self.requests.len()
     }
 
-    /// Fetched patches not decoded yet.
+    /// Fetched patches not decoded yet (waiting, or at the decode workers).
     pub fn undecoded(&self) -> usize {
-        self.ready.len()
+        self.ready.len() + self.at_workers
+    }
+
+    /// Patches at the decode workers.
+    pub fn at_workers(&self) -> usize {
+        self.at_workers
+    }
+
+    /// Up to `max` fetched patches, in arrival order, for decode workers: each node
+    /// and its job's message ([`crate::wire::Job`]: what decoding needs from the node
+    /// record, then the patch's bytes). Each is answered with [`Fetcher::deliver`], or
+    /// given back with [`Fetcher::requeue`] when its worker failed.
+    pub fn take_jobs(&mut self, max: usize, mips: bool) -> Vec<(u32, Vec<u8>)> {
+        let mut out = Vec::new();
+        while out.len() < max {
+            let Some(f) = self.ready.pop_front() else {
+                break;
+            };
+            match crate::wire::Job::of(&self.index, f.node, mips) {
+                Ok(job) => {
+                    self.at_workers += 1;
+                    out.push((f.node, job.to_bytes(&f.body[f.at])));
+                }
+                Err(e) => {
+                    self.busy.remove(&f.node);
+                    self.wanted.remove(&f.node);
+                    self.settled.push(Answer::Failed {
+                        node: f.node,
+                        error: e.to_string(),
+                    });
+                }
+            }
+        }
+        out
+    }
+
+    /// A decode worker's answer for a node of [`Fetcher::take_jobs`], the worker's
+    /// milliseconds, and this thread's for taking the reply in: taken by the next
+    /// [`Fetcher::drain_settled`] (or [`Fetcher::drain`]).
+    pub fn deliver(&mut self, answer: Answer, worker_ms: f64, reply_ms: f64) {
+        let node = match &answer {
+            Answer::Loaded { node, .. }
+            | Answer::Failed { node, .. }
+            | Answer::Unavailable { node, .. } => *node,
+        };
+        self.at_workers = self.at_workers.saturating_sub(1);
+        self.busy.remove(&node);
+        self.wanted.remove(&node);
+        self.stats.decoded += 1;
+        self.stats.worker_decoded += 1;
+        self.stats.worker_ms += worker_ms;
+        self.stats.reply_ms += reply_ms;
+        self.stats.reply_max_ms = self.stats.reply_max_ms.max(reply_ms);
+        self.settled.push(answer);
+    }
+
+    /// Gives back a job whose worker failed (its message as taken): decoded by the next
+    /// [`Fetcher::drain`] on this thread, first.
+    pub fn requeue(&mut self, node: u32, job: Vec<u8>) {
+        self.at_workers = self.at_workers.saturating_sub(1);
+        let body = match crate::wire::Job::parse(&job) {
+            Ok((_, bytes)) => bytes.to_vec(),
+            Err(_) => Vec::new(),
+        };
+        let at = 0..body.len();
+        self.ready.push_front(Fetched {
+            node,
+            body: Arc::new(body),
+            at,
+        });
     }
 
     fn free(&self, n: u32) -> bool {
@@ -406,6 +486,12 @@ impl Fetcher {
                 error: error.to_string(),
             });
         }
+    }
+
+    /// Moves settled answers (failed requests, the decode workers' answers) into `out`,
+    /// decoding nothing here (the decode workers take the fetched patches).
+    pub fn drain_settled(&mut self, out: &mut Vec<Answer>) {
+        out.append(&mut self.settled);
     }
 
     /// Moves settled answers into `out` and decodes fetched patches, in arrival order,

@@ -28,10 +28,13 @@ use crate::http::{Http, HttpError};
 use crate::pick::DepthPicker;
 use crate::plan::{Attempt, Fetcher, SparseBytes, PREFIX_BYTES};
 
-/// Most time one frame spends decoding fetched patches (main thread), milliseconds.
-/// Decoding runs between frames on the main thread in this first step (the web worker
-/// is next); the per-patch cost is in the statistics (`decode_ms_mean`).
+/// Most time one frame spends decoding fetched patches on the main thread,
+/// milliseconds: when the page gives no decode workers ([`Viewer::set_decoder`]) or
+/// they failed; the per-patch cost is in the statistics (`decode_ms_mean`).
 const DECODE_BUDGET_MS: f64 = 6.0;
+/// Jobs given to each decode worker at once (one decoding, one waiting, so a worker
+/// never idles between replies).
+const JOBS_PER_WORKER: usize = 2;
 /// Index pages read at open (as `tessera_http::TOP_PAGES`).
 const TOP_PAGES: u64 = 1;
 /// Root vertices kept to frame the home view (as the desktop viewer).
@@ -40,10 +43,14 @@ const HOME_POINTS: usize = 20_000;
 /// Milliseconds from the page's time origin (`performance.now()`).
 pub fn now_ms() -> f64 {
     thread_local! {
-        static PERF: Option<web_sys::Performance> = js_sys::global()
-            .dyn_into::<web_sys::Window>()
-            .ok()
-            .and_then(|w| w.performance());
+        static PERF: Option<web_sys::Performance> = {
+            let g = js_sys::global();
+            match g.dyn_ref::<web_sys::Window>() {
+                Some(w) => w.performance(),
+                // A decode worker.
+                None => g.dyn_ref::<web_sys::WorkerGlobalScope>().and_then(|w| w.performance()),
+            }
+        };
     }
     PERF.with(|p| p.as_ref().map_or_else(js_sys::Date::now, |p| p.now()))
 }
@@ -85,7 +92,8 @@ async fn read_with<T>(
 }
 
 /// The patch source: range requests through [`Fetcher`] (coalesced, at most 3 in
-/// flight), decoded between frames.
+/// flight), decoded by the page's decode workers ([`Viewer::set_decoder`]), or between
+/// frames on this thread without them.
 struct Remote {
     http: Rc<Http>,
     fetcher: Rc<RefCell<Fetcher>>,
@@ -94,12 +102,73 @@ struct Remote {
     closed: Rc<Cell<bool>>,
     /// The roots, fetched and decoded while opening (answered by `read_now`).
     roots: Vec<Answer>,
+    /// The page's decode function (a job's bytes in, a promise of the reply's bytes:
+    /// `crate::wire`), how many jobs it takes at once, and whether it failed (then
+    /// decoding falls back to this thread, for good).
+    decoder: Option<(js_sys::Function, usize)>,
+    workers_failed: Rc<Cell<bool>>,
+    /// Make textures' mips in the workers (a textured model).
+    mips: bool,
 }
 
 impl Remote {
     /// Sends what the fetcher wants sent; each answer sends more.
     fn pump(&self) {
         pump(&self.http, &self.fetcher, &self.fatal, &self.closed);
+    }
+
+    /// Hands fetched patches to the decode workers, as many as they take; each reply
+    /// is delivered to the fetcher when it comes (between frames).
+    fn dispatch(&self) {
+        let Some((decode, max_jobs)) = &self.decoder else {
+            return;
+        };
+        if self.workers_failed.get() {
+            return;
+        }
+        let room = max_jobs.saturating_sub(self.fetcher.borrow().at_workers());
+        if room == 0 {
+            return;
+        }
+        let jobs = self.fetcher.borrow_mut().take_jobs(room, self.mips);
+        for (node, job) in jobs {
+            let promise = match decode.call1(&JsValue::NULL, &js_sys::Uint8Array::from(&job[..])) {
+                Ok(p) => js_sys::Promise::resolve(&p),
+                Err(e) => {
+                    workers_failed(
+                        &self.fetcher,
+                        &self.workers_failed,
+                        node,
+                        job,
+                        format!("{e:?}"),
+                    );
+                    continue;
+                }
+            };
+            let (fetcher, failed, closed) = (
+                self.fetcher.clone(),
+                self.workers_failed.clone(),
+                self.closed.clone(),
+            );
+            spawn_local(async move {
+                let r = wasm_bindgen_futures::JsFuture::from(promise).await;
+                if closed.get() {
+                    return;
+                }
+                let t0 = now_ms();
+                let reply = match r {
+                    Ok(v) => v
+                        .dyn_into::<js_sys::Uint8Array>()
+                        .map_err(|_| "a reply that is not bytes".to_string())
+                        .and_then(|a| crate::wire::read_reply(node, &JsBytes(a))),
+                    Err(e) => Err(e.as_string().unwrap_or_else(|| format!("{e:?}"))),
+                };
+                match reply {
+                    Ok((answer, ms)) => fetcher.borrow_mut().deliver(answer, ms, now_ms() - t0),
+                    Err(why) => workers_failed(&fetcher, &failed, node, job, why),
+                }
+            });
+        }
     }
 }
 
@@ -149,15 +218,53 @@ fn pump(
     }
 }
 
+/// A worker's reply where it arrived (a `Uint8Array`), read by `crate::wire` straight
+/// into the decoded patch's arrays.
+struct JsBytes(js_sys::Uint8Array);
+
+impl crate::wire::ReplyBytes for JsBytes {
+    fn len(&self) -> usize {
+        self.0.length() as usize
+    }
+    fn copy_into(&self, at: usize, dst: &mut [u8]) {
+        self.0
+            .subarray(at as u32, (at + dst.len()) as u32)
+            .copy_to(dst);
+    }
+}
+
+/// A decode worker failed (it could not start, or crashed): node `node`'s job goes back
+/// to the fetcher, decoded on this thread, as is everything after it.
+fn workers_failed(
+    fetcher: &RefCell<Fetcher>,
+    failed: &Cell<bool>,
+    node: u32,
+    job: Vec<u8>,
+    why: String,
+) {
+    if !failed.replace(true) {
+        web_sys::console::warn_1(
+            &format!("tessera: decode workers failed ({why}); decoding on the main thread").into(),
+        );
+    }
+    fetcher.borrow_mut().requeue(node, job);
+}
+
 impl PatchSource for Remote {
     fn request(&mut self, wanted: &[(u32, f32)]) {
         self.fetcher.borrow_mut().set_wanted(wanted);
         self.pump();
     }
     fn poll(&mut self, out: &mut Vec<Answer>) {
-        self.fetcher
-            .borrow_mut()
-            .drain(out, DECODE_BUDGET_MS, now_ms);
+        if self.decoder.is_some() && !self.workers_failed.get() {
+            self.dispatch();
+            // The workers' answers; fetched patches wait for a worker.
+            self.fetcher.borrow_mut().drain_settled(out);
+        } else {
+            self.fetcher
+                .borrow_mut()
+                .drain(out, DECODE_BUDGET_MS, now_ms);
+        }
         self.pump();
     }
     fn pending(&self) -> usize {
@@ -539,6 +646,9 @@ impl Viewer {
             fatal: Rc::new(RefCell::new(None)),
             closed: Rc::new(Cell::new(false)),
             roots,
+            decoder: None,
+            workers_failed: Rc::new(Cell::new(false)),
+            mips: textured,
         };
         let quant_step = grid.step();
         let mut uploads = UploadTimes::default();
@@ -700,6 +810,7 @@ impl Viewer {
             self.converged_ms = Some(now_ms() - self.opened_ms);
         }
         let f = fetch.stats();
+        let main_decoded = f.decoded - f.worker_decoded;
         let s = &self.stats;
         let u = self.uploads;
         // The drawn patch with the largest texture: its size in the file and as
@@ -749,8 +860,19 @@ impl Viewer {
             "largest_texture": largest_texture,
             "ram_bytes": s.ram_resident_bytes,
             "selection_ms": s.selection_ms,
+            // Patches decoded: all, and by the decode workers (their time is off the
+            // main thread, mips included); the decode_ms_* figures are this thread's
+            // (roots, and every patch without workers).
             "decoded": f.decoded,
-            "decode_ms_mean": if f.decoded > 0 { f.decode_ms / f.decoded as f64 } else { 0.0 },
+            "worker_decoded": f.worker_decoded,
+            "worker_decode_ms_mean": if f.worker_decoded > 0 { f.worker_ms / f.worker_decoded as f64 } else { 0.0 },
+            "at_workers": fetch.at_workers(),
+            // Main-thread time taking the workers' replies in (copies).
+            "reply_ms_mean": if f.worker_decoded > 0 { f.reply_ms / f.worker_decoded as f64 } else { 0.0 },
+            "reply_ms_max": f.reply_max_ms,
+            "decode_workers": self.source.decoder.as_ref().map_or(0, |d| d.1 / JOBS_PER_WORKER),
+            "workers_failed": self.source.workers_failed.get(),
+            "decode_ms_mean": if main_decoded > 0 { f.decode_ms / main_decoded as f64 } else { 0.0 },
             "decode_ms_max": f.decode_max_ms,
             "decode_ms_total": f.decode_ms,
             // Uploads into the GPU cache (main thread): textured patches make their
@@ -863,6 +985,15 @@ impl Viewer {
             }
             growing.set(false);
         });
+    }
+
+    /// Decodes fetched patches with `decode` from now on: called with a job's bytes
+    /// (a `Uint8Array`, `crate::wire`), it returns a promise of the reply's bytes (the
+    /// page's decode workers run [`crate::worker::decode_job`] on it). `workers` is how
+    /// many run at once. Without a decoder, or once it fails, patches are decoded on
+    /// this thread between frames.
+    pub fn set_decoder(&mut self, decode: js_sys::Function, workers: u32) {
+        self.source.decoder = (workers > 0).then(|| (decode, workers as usize * JOBS_PER_WORKER));
     }
 
     /// The canvas was resized to `width` x `height` pixels.

@@ -123,9 +123,37 @@ struct Fake<'a> {
     in_flight: Vec<Request>,
     sent: Vec<Request>,
     fail_every: u64,
+    /// Decode workers: fetched patches go out as jobs and come back one poll later,
+    /// in reverse order; the `worker_dies_every`-th job's worker dies (its job given
+    /// back, everything decoded here from then on, as the viewer does).
+    workers: bool,
+    jobs: Vec<(u32, Vec<u8>)>,
+    worker_dies_every: usize,
+    jobs_run: usize,
 }
 
-impl Fake<'_> {
+impl<'a> Fake<'a> {
+    /// Failing every `fail_every`-th request (0: none); with decode workers when
+    /// `worker_dies_every` is given (0: they never die).
+    fn new(
+        file: &'a [u8],
+        index: &Arc<ModelIndex>,
+        fail_every: u64,
+        worker_dies_every: Option<usize>,
+    ) -> Fake<'a> {
+        Fake {
+            file,
+            fetcher: Fetcher::new(index.clone()),
+            in_flight: Vec::new(),
+            sent: Vec::new(),
+            fail_every,
+            workers: worker_dies_every.is_some(),
+            jobs: Vec::new(),
+            worker_dies_every: worker_dies_every.unwrap_or(0),
+            jobs_run: 0,
+        }
+    }
+
     fn pump(&mut self) {
         while let Some(r) = self.fetcher.next_request() {
             assert!(self.fetcher.in_flight() <= MAX_IN_FLIGHT);
@@ -152,7 +180,28 @@ impl PatchSource for Fake<'_> {
     }
     fn poll(&mut self, out: &mut Vec<Answer>) {
         self.deliver();
-        self.fetcher.drain(out, 1e9, || 0.0);
+        if self.workers {
+            // As the viewer: while the workers run, nothing is decoded here; once one
+            // dies, its job and everything after are.
+            while let Some((node, job)) = self.jobs.pop() {
+                self.jobs_run += 1;
+                if self.worker_dies_every > 0 && self.jobs_run % self.worker_dies_every == 0 {
+                    self.fetcher.requeue(node, job);
+                    self.workers = false;
+                    continue;
+                }
+                let reply = tessera_web::wire::run_job(&job, |_, _, _| Vec::new(), || 0.0);
+                let (answer, ms) = tessera_web::wire::read_reply(node, &reply[..]).unwrap();
+                self.fetcher.deliver(answer, ms, 0.0);
+            }
+        }
+        if self.workers {
+            let jobs = self.fetcher.take_jobs(8, true);
+            self.jobs.extend(jobs);
+            self.fetcher.drain_settled(out);
+        } else {
+            self.fetcher.drain(out, 1e9, || 0.0);
+        }
         self.pump();
     }
     fn pending(&self) -> usize {
@@ -198,6 +247,18 @@ fn camera(index: &ModelIndex) -> Camera {
     .unwrap()
 }
 
+/// The cut a source answering at once converges to, and the frames it takes.
+fn direct_cut(index: &ModelIndex, file: &[u8]) -> (Vec<u32>, u32) {
+    converge(
+        index,
+        &mut Direct {
+            index,
+            file,
+            wanted: Vec::new(),
+        },
+    )
+}
+
 fn converge<S: PatchSource>(index: &ModelIndex, src: &mut S) -> (Vec<u32>, u32) {
     let mut sched = Scheduler::new(
         index,
@@ -226,21 +287,8 @@ fn coalesced_out_of_order_fetches_converge_to_the_direct_cut() {
     let file = model(dir.path());
     let index = Arc::new(ModelIndex::read(file.as_slice()).unwrap());
 
-    let (direct, direct_frames) = converge(
-        &index,
-        &mut Direct {
-            index: &index,
-            file: &file,
-            wanted: Vec::new(),
-        },
-    );
-    let mut fake = Fake {
-        file: &file,
-        fetcher: Fetcher::new(index.clone()),
-        in_flight: Vec::new(),
-        sent: Vec::new(),
-        fail_every: 0,
-    };
+    let (direct, direct_frames) = direct_cut(&index, &file);
+    let mut fake = Fake::new(&file, &index, 0, None);
     let (fetched, frames) = converge(&index, &mut fake);
     assert_eq!(fetched, direct, "the fetched cut differs");
     assert!(direct.len() > 50, "a deep cut: {} nodes", direct.len());
@@ -272,13 +320,7 @@ fn coalesced_out_of_order_fetches_converge_to_the_direct_cut() {
 
     // Every third request fails: those nodes come back unavailable and are asked again
     // after the scheduler's backoff; with a clock that moves, the cut still converges.
-    let mut flaky = Fake {
-        file: &file,
-        fetcher: Fetcher::new(index.clone()),
-        in_flight: Vec::new(),
-        sent: Vec::new(),
-        fail_every: 3,
-    };
+    let mut flaky = Fake::new(&file, &index, 3, None);
     let mut sched = Scheduler::new(
         &index,
         SchedulerOptions {
@@ -307,6 +349,53 @@ fn coalesced_out_of_order_fetches_converge_to_the_direct_cut() {
     d.sort_unstable();
     assert_eq!(d, direct);
     assert!(flaky.fetcher.stats().failed_requests > 0);
+}
+
+/// Decoding in workers (jobs out, replies back a frame later, out of order, some
+/// workers dying and their jobs decoded here instead) converges to the same cut, and
+/// every reply is the patch the file holds.
+#[test]
+fn decode_workers_converge_to_the_direct_cut() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = model(dir.path());
+    let index = Arc::new(ModelIndex::read(file.as_slice()).unwrap());
+    let (direct, _) = direct_cut(&index, &file);
+    let mut fake = Fake::new(&file, &index, 0, Some(40));
+    let (fetched, _) = converge(&index, &mut fake);
+    assert_eq!(fetched, direct, "the cut decoded by workers differs");
+    let s = fake.fetcher.stats();
+    assert!(
+        s.worker_decoded > 0 && s.worker_decoded < s.decoded,
+        "{s:?}"
+    );
+    assert_eq!(fake.fetcher.undecoded(), 0);
+
+    // Every node's reply is its patch, bit for bit; a corrupted patch is its error.
+    for n in 0..index.nodes().len() as u32 {
+        let range = index.patch_range(n as usize).unwrap();
+        let bytes = &file[range.start as usize..range.end as usize];
+        let job = tessera_web::wire::Job::of(&index, n, false).unwrap();
+        let reply = tessera_web::wire::run_job(&job.to_bytes(bytes), |_, _, _| Vec::new(), || 0.0);
+        match tessera_web::wire::read_reply(n, &reply[..]).unwrap().0 {
+            Answer::Loaded { node, patch } => {
+                assert_eq!(node, n);
+                assert_eq!(
+                    *patch,
+                    index.read_patch(file.as_slice(), n as usize).unwrap()
+                );
+            }
+            a => panic!("node {n}: {a:?}"),
+        }
+    }
+    let range = index.patch_range(5).unwrap();
+    let mut bad = file[range.start as usize..range.end as usize].to_vec();
+    bad[10] ^= 1;
+    let job = tessera_web::wire::Job::of(&index, 5, false).unwrap();
+    let reply = tessera_web::wire::run_job(&job.to_bytes(&bad), |_, _, _| Vec::new(), || 0.0);
+    match tessera_web::wire::read_reply(5, &reply[..]).unwrap().0 {
+        Answer::Failed { node: 5, error } => assert!(error.contains("checksum"), "{error}"),
+        a => panic!("{a:?}"),
+    }
 }
 
 thread_local! {

@@ -124,6 +124,11 @@ pub struct PatchTexture {
     pub codec: Option<TextureCodec>,
     pub encoded: Vec<u8>,
     pub rgba: Vec<u8>,
+    /// Mip levels 1, 2, .. of `rgba` (RGBA8, each half the last, down to 1x1), when
+    /// they were made before the upload (the browser's decode workers make them off
+    /// the main thread); empty: the GPU cache makes them when it uploads. Never stored
+    /// in a file.
+    pub mips: Vec<Vec<u8>>,
 }
 
 impl PatchTexture {
@@ -164,6 +169,7 @@ impl PatchTexture {
             codec: Some(codec),
             encoded,
             rgba: Vec::new(),
+            mips: Vec::new(),
         })
     }
 
@@ -796,6 +802,7 @@ fn decode_texture_block(b: &[u8], size: [u16; 2]) -> Result<PatchTexture, Format
         codec: Some(codec),
         encoded: b[TEXTURE_HEADER_BYTES..].to_vec(),
         rgba: Vec::new(),
+        mips: Vec::new(),
     })
 }
 
