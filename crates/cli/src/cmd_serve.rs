@@ -16,10 +16,14 @@ pub struct Args {
     /// Most connections served at once (more wait in the listen backlog).
     #[arg(long, default_value_t = 512)]
     max_connections: usize,
-    /// Serve the browser viewer from DIR at / (build it with `scripts/build-web`, which
-    /// writes web/dist): http://ADDR/ opens the first model, /?model=URL another.
-    #[arg(long, value_name = "DIR")]
+    /// Serve the browser viewer from DIR at / instead of the one built into this
+    /// binary (`scripts/build-web` writes it to web/dist, which the next build of
+    /// tessera embeds): http://ADDR/ opens the first model, /?model=URL another.
+    #[arg(long, value_name = "DIR", conflicts_with = "no_web")]
     web: Option<PathBuf>,
+    /// Serve no viewer page: only the models and the catalogue.
+    #[arg(long)]
+    no_web: bool,
 }
 
 pub fn run(a: Args) -> anyhow::Result<ExitCode> {
@@ -27,9 +31,11 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         addr: a.addr,
         max_connections: a.max_connections,
         web_dir: a.web.clone(),
+        embedded_web: !a.no_web,
         ..Default::default()
     };
-    let web = a.web.is_some();
+    let embedded = !tessera_serve::EMBEDDED_WEB.is_empty();
+    let web = a.web.is_some() || (!a.no_web && embedded);
     tessera_serve::serve_blocking(&a.inputs, opts, |server| {
         let addr = server.local_addr();
         let names = server.model_names();
@@ -37,6 +43,8 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         println!("serving {} model{s} at http://{addr}/", names.len());
         if web {
             println!("viewer: http://{addr}/ (?model=/models/NAME.tsr picks a model)");
+        } else if !a.no_web {
+            println!("no viewer: this binary was built without it (run scripts/build-web, then build tessera again, or pass --web DIR)");
         }
         for n in &names {
             println!("  http://{addr}/models/{n}");

@@ -80,7 +80,12 @@ fn dist() -> PathBuf {
             d.join(f).display()
         );
     }
-    for f in ["index.html", "embed.html", "tessera.js", "tessera_worker.js"] {
+    for f in [
+        "index.html",
+        "embed.html",
+        "tessera.js",
+        "tessera_worker.js",
+    ] {
         let src = std::fs::read(repo().join("web").join(f)).unwrap();
         assert!(
             std::fs::read(d.join(f)).unwrap() == src,
@@ -113,13 +118,19 @@ impl Drop for Running {
 
 /// `tessera serve DIR --addr 127.0.0.1:0 --web WEB`; the address from its first line.
 fn serve(dir: &Path, web: &Path) -> (Running, SocketAddr) {
+    serve_with(dir, Some(web))
+}
+
+/// `tessera serve DIR --addr 127.0.0.1:0`, with `--web WEB` when given (else the viewer
+/// built into the binary).
+fn serve_with(dir: &Path, web: Option<&Path>) -> (Running, SocketAddr) {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_tessera"));
+    cmd.arg("serve").arg(dir).args(["--addr", "127.0.0.1:0"]);
+    if let Some(web) = web {
+        cmd.arg("--web").arg(web);
+    }
     let mut child = Running(
-        Command::new(env!("CARGO_BIN_EXE_tessera"))
-            .arg("serve")
-            .arg(dir)
-            .args(["--addr", "127.0.0.1:0", "--web"])
-            .arg(web)
-            .stdout(Stdio::piped())
+        cmd.stdout(Stdio::piped())
             .stderr(Stdio::null())
             .spawn()
             .unwrap(),
@@ -1353,7 +1364,8 @@ const SCISSORS_CAMERA: &str = r#"{"position": [-0.03, -0.02, 0.20], "target": [-
 /// texture from its first mip that fits and still draws the same picture.
 #[test]
 fn the_page_draws_a_textured_scan_as_tessera_render() {
-    let web = dist();
+    // The built viewer must be current; it is served built into the binary below.
+    dist();
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     let obj = repo().join("../shared/data/ycb-scissors/textured_simple_reoriented.obj");
@@ -1382,7 +1394,9 @@ fn the_page_draws_a_textured_scan_as_tessera_render() {
         .max()
         .unwrap();
     drop(index);
-    let (_server, addr) = serve(&models, &web);
+    // The viewer built into the binary (no --web): web/dist's files (tessera-serve's
+    // tests check they are the same bytes).
+    let (_server, addr) = serve_with(&models, None);
     let camera = format!(r#"{SCISSORS_CAMERA}, "width": {WIDTH}, "height": {HEIGHT}}}"#);
     let hash = format!("#camera={}", encode(&camera));
     let base = format!("http://{addr}");

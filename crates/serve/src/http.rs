@@ -20,8 +20,24 @@ use crate::range::{self, Ranges};
 pub struct Shared {
     pub models: Models,
     pub request_timeout: Duration,
-    /// Static files served at `/` (canonical path), if any.
-    pub web_dir: Option<std::path::PathBuf>,
+    /// The browser viewer served at `/`, if any.
+    pub web: Web,
+}
+
+/// Where the static files served at `/` come from.
+#[derive(Clone, Debug)]
+pub enum Web {
+    None,
+    /// A directory (canonical path): `tessera serve --web DIR`.
+    Dir(std::path::PathBuf),
+    /// The viewer built into the binary ([`crate::EMBEDDED_WEB`]).
+    Embedded(&'static [(&'static str, &'static [u8])]),
+}
+
+impl Web {
+    fn is_some(&self) -> bool {
+        !matches!(self, Web::None)
+    }
 }
 
 type St = Arc<Shared>;
@@ -86,7 +102,7 @@ async fn dispatch(AxState(st): AxState<St>, req: Request) -> Response<Body> {
         Route::Model(rest.to_string())
     } else if path == "/" {
         Route::Root
-    } else if st.web_dir.is_some() {
+    } else if st.web.is_some() {
         Route::Static(path.clone())
     } else {
         return text(StatusCode::NOT_FOUND, "not found\n");
@@ -114,10 +130,12 @@ async fn dispatch(AxState(st): AxState<St>, req: Request) -> Response<Body> {
     let head = method == Method::HEAD;
     let work = async {
         match route {
-            Route::Root if st.web_dir.is_some() => static_file(&st, "/index.html").await,
+            Route::Root if st.web.is_some() => static_file(&st, "/index.html").await,
             Route::Root => text(
                 StatusCode::OK,
-                "tessera serve: the model catalogue is at /api/models\n",
+                "tessera serve: the model catalogue is at /api/models; no viewer page is \
+                 served here (`--web DIR` serves one, as does a tessera built after \
+                 scripts/build-web)\n",
             ),
             Route::Static(p) => static_file(&st, &p).await,
             Route::Catalogue => catalogue(&st).await,
@@ -164,11 +182,8 @@ fn content_type(name: &str) -> &'static str {
 /// A file of the web directory: every segment of `path` percent-decoded and checked
 /// like a model name (no separators, control characters or leading dots), the result
 /// resolved inside the directory (symbolic links out of it are not followed), read
-/// whole (the viewer's files are small).
+/// whole (the viewer's files are small); or the embedded file of that name.
 async fn static_file(st: &St, path: &str) -> Response<Body> {
-    let Some(root) = st.web_dir.clone() else {
-        return text(StatusCode::NOT_FOUND, "not found\n");
-    };
     let mut rel = std::path::PathBuf::new();
     for seg in path.trim_start_matches('/').split('/') {
         match decode_name(seg) {
@@ -177,16 +192,26 @@ async fn static_file(st: &St, path: &str) -> Response<Body> {
         }
     }
     let name = rel.to_string_lossy().into_owned();
-    let read = tokio::task::spawn_blocking(move || {
-        let p = std::fs::canonicalize(root.join(&rel)).ok()?;
-        if !p.starts_with(&root) || !p.is_file() {
-            return None;
+    let read = match &st.web {
+        Web::None => None,
+        Web::Embedded(files) => files
+            .iter()
+            .find(|(n, _)| *n == name)
+            .map(|(_, b)| bytes::Bytes::from_static(b)),
+        Web::Dir(root) => {
+            let root = root.clone();
+            tokio::task::spawn_blocking(move || {
+                let p = std::fs::canonicalize(root.join(&rel)).ok()?;
+                if !p.starts_with(&root) || !p.is_file() {
+                    return None;
+                }
+                std::fs::read(p).ok().map(bytes::Bytes::from)
+            })
+            .await
+            .ok()
+            .flatten()
         }
-        std::fs::read(p).ok()
-    })
-    .await
-    .ok()
-    .flatten();
+    };
     let Some(body) = read else {
         return text(StatusCode::NOT_FOUND, "not found\n");
     };

@@ -35,7 +35,10 @@
 //!   file of that name under the directory, each path segment percent-decoded and
 //!   checked like a model name, resolved inside the directory only (`404` otherwise),
 //!   with its content type (`application/wasm` for `.wasm`) and `Cache-Control:
-//!   no-cache`. Without it `/` answers one line of text.
+//!   no-cache`. Without it, the same files of the viewer built into the binary
+//!   ([`EMBEDDED_WEB`]: `build.rs` embeds `web/dist` when `scripts/build-web` has built
+//!   it), unless [`ServeOptions::embedded_web`] is off; with neither, `/` answers one
+//!   line of text.
 //! - CORS for embedding: `Access-Control-Allow-Origin: *`, methods `GET, HEAD, OPTIONS`,
 //!   the `Range`, `If-Range` and other conditional request headers allowed,
 //!   `Content-Range`, `Content-Length`, `ETag`, `Accept-Ranges`, `Last-Modified` exposed.
@@ -94,8 +97,12 @@ pub struct ServeOptions {
     pub shutdown_grace: Duration,
     /// A directory of static files (the browser viewer built by `scripts/build-web`,
     /// `web/dist`) served at `/`: `GET /` is its `index.html`, `GET /NAME` its file
-    /// `NAME` (None: `/` answers a line of text).
+    /// `NAME` (None: the viewer built into the binary, see `embedded_web`).
     pub web_dir: Option<PathBuf>,
+    /// Without `web_dir`: serve the browser viewer built into the binary
+    /// ([`EMBEDDED_WEB`], when `scripts/build-web` ran before it was built) at `/`
+    /// (true). Without either, `/` answers a line of text.
+    pub embedded_web: bool,
 }
 
 impl Default for ServeOptions {
@@ -110,9 +117,12 @@ impl Default for ServeOptions {
             rescan_interval: Duration::from_secs(2),
             shutdown_grace: Duration::from_secs(10),
             web_dir: None,
+            embedded_web: true,
         }
     }
 }
+
+include!(concat!(env!("OUT_DIR"), "/embedded_web.rs"));
 
 /// Why the server could not start (or stopped with an error).
 #[derive(Debug, thiserror::Error)]
@@ -182,8 +192,11 @@ impl Server {
                 })
             }
         };
-        let web_dir = match &opts.web_dir {
-            None => None,
+        let web = match &opts.web_dir {
+            None if opts.embedded_web && !EMBEDDED_WEB.is_empty() => {
+                http::Web::Embedded(EMBEDDED_WEB)
+            }
+            None => http::Web::None,
             Some(d) => {
                 let canon = std::fs::canonicalize(d).map_err(|source| ServeError::Input {
                     path: d.clone(),
@@ -197,7 +210,7 @@ impl Server {
                         ),
                     });
                 }
-                Some(canon)
+                http::Web::Dir(canon)
             }
         };
         Ok(Server {
@@ -205,7 +218,7 @@ impl Server {
             shared: Arc::new(http::Shared {
                 models,
                 request_timeout: opts.request_timeout,
-                web_dir,
+                web,
             }),
             opts,
         })

@@ -1,6 +1,7 @@
 //! `ServeOptions::web_dir` (`tessera serve --web DIR`): the browser viewer's static files
 //! at `/`, with their content types, nothing outside the directory, the models and the
-//! catalogue unchanged; a directory without `index.html` is refused at start.
+//! catalogue unchanged; a directory without `index.html` is refused at start. Without
+//! it, the viewer built into the binary (`EMBEDDED_WEB`).
 
 use std::path::PathBuf;
 use std::time::Duration;
@@ -40,6 +41,15 @@ fn start(
     inputs: Vec<PathBuf>,
     web: PathBuf,
 ) -> Result<(String, tokio::sync::oneshot::Sender<()>), ServeError> {
+    start_with(inputs, Some(web), true)
+}
+
+/// Serves `inputs` with `web_dir` and `embedded_web` as given.
+fn start_with(
+    inputs: Vec<PathBuf>,
+    web: Option<PathBuf>,
+    embedded_web: bool,
+) -> Result<(String, tokio::sync::oneshot::Sender<()>), ServeError> {
     let (tx, rx) = tokio::sync::oneshot::channel::<()>();
     let (ready_tx, ready_rx) = std::sync::mpsc::channel();
     std::thread::spawn(move || {
@@ -51,7 +61,8 @@ fn start(
         rt.block_on(async move {
             let opts = ServeOptions {
                 addr: "127.0.0.1:0".parse().unwrap(),
-                web_dir: Some(web),
+                web_dir: web,
+                embedded_web,
                 ..ServeOptions::default()
             };
             match Server::bind(&inputs, opts).await {
@@ -149,4 +160,76 @@ fn the_web_directory_is_served_at_the_root() {
         }
         other => panic!("expected a refusal, got {:?}", other.map(|s| s.0)),
     }
+}
+
+/// Without `--web`, the viewer built into the binary: byte for byte the files of
+/// `web/dist` it was built from (so a stale embed fails here), with their types;
+/// `--no-web` (or a binary built before the viewer) answers `/` with a line of text.
+#[test]
+fn the_embedded_viewer_is_the_built_one() {
+    let tmp = tempfile::tempdir().unwrap();
+    let models = tmp.path().join("models");
+    std::fs::create_dir(&models).unwrap();
+    std::fs::write(models.join("m.tsr"), model()).unwrap();
+    let dist = std::env::var_os("TESSERA_WEB_DIST")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../web/dist"));
+    let built = dist.join("tessera_web_bg.wasm").is_file();
+    assert_eq!(
+        !tessera_serve::EMBEDDED_WEB.is_empty(),
+        built,
+        "the embedded viewer does not follow {}: build tessera-serve again",
+        dist.display()
+    );
+    let (base, _stop) = start_with(vec![models.clone()], None, true).expect("server");
+    let (s, ct, body) = get(&format!("{base}/"));
+    assert_eq!(s, 200);
+    if built {
+        assert_eq!(ct.as_deref(), Some("text/html; charset=utf-8"));
+        assert_eq!(body, std::fs::read(dist.join("index.html")).unwrap());
+        for (name, ty) in [
+            ("index.html", "text/html; charset=utf-8"),
+            ("embed.html", "text/html; charset=utf-8"),
+            ("tessera.js", "text/javascript; charset=utf-8"),
+            ("tessera_worker.js", "text/javascript; charset=utf-8"),
+            ("tessera_web.js", "text/javascript; charset=utf-8"),
+            ("tessera_web_bg.wasm", "application/wasm"),
+        ] {
+            let (s, ct, body) = get(&format!("{base}/{name}"));
+            assert_eq!((s, ct.as_deref()), (200, Some(ty)), "{name}");
+            assert!(
+                body == std::fs::read(dist.join(name)).unwrap(),
+                "/{name} is not {}: build tessera-serve again after scripts/build-web",
+                dist.join(name).display()
+            );
+        }
+        // The page's own source is what was built (web/ against web/dist).
+        let web = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../web");
+        for name in ["index.html", "tessera.js", "tessera_worker.js"] {
+            let (_, _, body) = get(&format!("{base}/{name}"));
+            assert!(
+                body == std::fs::read(web.join(name)).unwrap(),
+                "/{name} differs from web/{name}: run scripts/build-web, then build again"
+            );
+        }
+        for bad in [
+            "/missing.js",
+            "/.secret",
+            "/%2e%2e/Cargo.toml",
+            "/sub/index.html",
+        ] {
+            assert_eq!(get(&format!("{base}{bad}")).0, 404, "{bad}");
+        }
+    } else {
+        assert!(String::from_utf8_lossy(&body).contains("no viewer page"));
+    }
+    let (s, _, m) = get(&format!("{base}/models/m.tsr"));
+    assert_eq!(s, 200);
+    assert_eq!(m, std::fs::read(models.join("m.tsr")).unwrap());
+
+    let (base, _stop2) = start_with(vec![models], None, false).expect("server");
+    let (s, ct, body) = get(&format!("{base}/"));
+    assert_eq!((s, ct.as_deref()), (200, Some("text/plain; charset=utf-8")));
+    assert!(String::from_utf8_lossy(&body).contains("/api/models"));
+    assert_eq!(get(&format!("{base}/tessera.js")).0, 404);
 }

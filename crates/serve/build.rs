@@ -1,0 +1,53 @@
+//! Builds the browser viewer into the binary: when `web/dist` (or `TESSERA_WEB_DIST`)
+//! holds a complete build of it (`scripts/build-web`), its files are embedded with
+//! `include_bytes!` and `tessera serve` serves them at `/` with no `--web`; otherwise
+//! the list is empty and the server says how to get the viewer.
+
+use std::path::PathBuf;
+
+/// The viewer's files, as `scripts/build-web` writes them.
+const FILES: [&str; 7] = [
+    "index.html",
+    "embed.html",
+    "tessera.js",
+    "tessera_worker.js",
+    "tessera_web.js",
+    "tessera_web_bg.wasm",
+    "package.json",
+];
+
+fn main() {
+    println!("cargo:rerun-if-env-changed=TESSERA_WEB_DIST");
+    let manifest = PathBuf::from(std::env::var_os("CARGO_MANIFEST_DIR").unwrap());
+    let dist = std::env::var_os("TESSERA_WEB_DIST")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| manifest.join("../../web/dist"));
+    let mut code = String::from(
+        "/// The browser viewer's files built into this binary (name, bytes); empty when\n\
+         /// `web/dist` was not built (`scripts/build-web`) before this crate.\n\
+         pub static EMBEDDED_WEB: &[(&str, &[u8])] = &[\n",
+    );
+    if FILES.iter().all(|f| dist.join(f).is_file()) {
+        for f in FILES {
+            let p = dist.join(f).canonicalize().unwrap();
+            println!("cargo:rerun-if-changed={}", p.display());
+            code += &format!(
+                "    ({f:?}, include_bytes!({:?})),\n",
+                p.display().to_string()
+            );
+        }
+    } else {
+        // Built later: the directory (or its parent, while it does not exist) changes.
+        let watch = if dist.is_dir() {
+            dist.clone()
+        } else {
+            dist.join("..")
+        };
+        println!("cargo:rerun-if-changed={}", watch.display());
+    }
+    code += "];\n";
+    let out = PathBuf::from(std::env::var_os("OUT_DIR").unwrap()).join("embedded_web.rs");
+    if std::fs::read_to_string(&out).ok().as_deref() != Some(code.as_str()) {
+        std::fs::write(&out, code).unwrap();
+    }
+}
