@@ -17,6 +17,8 @@
 //   v.camera();     // the current camera (sized as the canvas)
 //   await v.screenshot();  // a PNG Blob of the view at the canvas's pixel size
 //   await v.pointAt(x, y);  // the point drawn under canvas pixel (x, y), or null
+//   await v.pick(x, y);     // the full-resolution surface point under it ({point,
+//                           // normal, distance, exact, ...}), or null
 //   v.dispose();    // stops the frame loop, frees the GPU and wasm memory (and the
 //                   // decode workers, with the page's last view)
 //
@@ -306,6 +308,19 @@ export class View extends EventTarget {
       this.#pointQueries.set(id, resolve);
       this.#viewer.point_at(id, x, y);
     });
+  }
+
+  /**
+   * The point of the model's full-resolution surface under canvas pixel (`x`, `y`)
+   * (canvas.width x canvas.height pixels, top-left origin), whatever the view draws:
+   * the leaf patches under the ray are fetched as the pick needs them. Resolves to
+   * { point: [x, y, z], normal, distance, node, triangle, exact, passes, patches,
+   * bytes, ms } (model coordinates; exact: false when the index read so far shows no
+   * deeper level there), or null when the ray misses the model.
+   */
+  pick(x, y) {
+    if (this.#disposed) return Promise.reject(new Error('pick: the view was disposed'));
+    return this.#viewer.pick(x, y);
   }
 
   /** Back to the home view. */

@@ -19,7 +19,8 @@
 // drag, dispatched as CDP touch events, each waited to idle; the point drawn under the
 // pinch's centre before it, in canvas pixels "pinch_at"; the canvas's touch-action
 // and the page's scroll offset), "pick" (with "pick": {"centre": [x, y], "off": [[x, y],
-// ...]} in canvas pixels: pointAt of the centre, then a double-click there and the
+// ...]} in canvas pixels: pointAt and the full-resolution pick() of the centre ("full"),
+// then a double-click there and the
 // camera once idle again; then the first "off" pixel with a point under it, a wheel
 // step there, the cameras before and after and pointAt of that pixel after)}].
 // "cycles" (with "cycles": {"count", "model", "size": [w, h], "gc" (default true: collect
@@ -363,6 +364,8 @@ for (const visit of plan.visits) {
       const c = visit.pick.centre;
       const before = await camera();
       const centre_point = await pointAt(c);
+      // The full-resolution pick of the same pixel (leaf patches fetched for it).
+      const full = await page.evaluate(([x, y]) => window.tesseraView.pick(x, y), c);
       await page.mouse.dblclick(...client(c));
       await settle();
       const recentred = await camera();
@@ -381,7 +384,7 @@ for (const visit of plan.visits) {
         await settle();
         zoom = { ...off, after: await camera(), point_after: await pointAt(off.pixel) };
       }
-      pick = { before, centre_point, recentred, zoom };
+      pick = { before, centre_point, full, recentred, zoom };
     } catch (e) {
       consoleLines.push(`driver: pick: ${e.message.split('\n')[0]}`);
     }

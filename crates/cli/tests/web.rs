@@ -321,6 +321,26 @@ fn pick_checks(r: &Value, mesh_path: &Path) {
         e_query < 2.0 * pixel,
         "pointAt is off the surface: {e_query:.2e}"
     );
+    // The full-resolution pick: on the input mesh's surface (its leaves are the input,
+    // quantised to the model's grid), whatever the cut drawn.
+    let full = &p["full"];
+    assert!(full.is_object(), "no full-resolution pick: {p:#}");
+    let e_full = len(sub(point(&full["point"]), surface));
+    eprintln!(
+        "full-resolution pick: {e_full:.2e} from the input mesh's surface ({:.4} px), exact {}, {} passes, {} patches ({} bytes) fetched, {:.1} ms",
+        e_full / pixel,
+        full["exact"],
+        full["passes"],
+        full["patches"],
+        full["bytes"],
+        full["ms"].as_f64().unwrap_or(0.0)
+    );
+    assert_eq!(full["exact"], true, "{full:#}");
+    assert!(full["patches"].as_u64().unwrap() >= 1, "{full:#}");
+    assert!(
+        e_full < 0.05 * pixel && e_full <= e_query.max(1e-12),
+        "the full-resolution pick is {e_full:.2e} off the surface (pointAt: {e_query:.2e})"
+    );
     // Recentre keeps the orientation and brings the point to the centre at its depth.
     let rec = cam(&p["recentred"]);
     let turn = dot(

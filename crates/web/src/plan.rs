@@ -205,8 +205,10 @@ pub struct Fetcher {
     settled: Vec<Answer>,
     /// Nodes failed for good ([`Fetcher::fail`]).
     gone: FxHashSet<u32>,
-    /// Patches handed to decode workers and not answered yet.
+    /// Patches handed to decode workers and not answered yet, and their decoded bytes
+    /// (estimated from their node records: [`Fetcher::job_bytes`]).
     at_workers: usize,
+    at_workers_bytes: u64,
     next_id: u64,
     stats: FetchStats,
 }
@@ -225,6 +227,7 @@ impl Fetcher {
             settled: Vec::new(),
             gone: FxHashSet::default(),
             at_workers: 0,
+            at_workers_bytes: 0,
             next_id: 0,
             stats: FetchStats::default(),
         }
@@ -286,19 +289,43 @@ impl Fetcher {
         self.at_workers
     }
 
-    /// Up to `max` fetched patches, in arrival order, for decode workers: each node
-    /// and its job's message ([`crate::wire::Job`]: what decoding needs from the node
-    /// record, then the patch's bytes). Each is answered with [`Fetcher::deliver`], or
-    /// given back with [`Fetcher::requeue`] when its worker failed.
-    pub fn take_jobs(&mut self, max: usize, mips: bool) -> Vec<(u32, Vec<u8>)> {
+    /// Bytes node `n`'s patch takes decoded (its reply: vertices with every attribute,
+    /// indices, the texture with its mips), estimated from its node record: what the
+    /// decode workers' replies in flight are bounded by.
+    pub fn job_bytes(&self, n: u32) -> u64 {
+        self.index.node(n as usize).map_or(0, |r| {
+            let texels = u64::from(r.texture_size[0]) * u64::from(r.texture_size[1]);
+            u64::from(r.patch_bytes)
+                + u64::from(r.vertex_count) * 48
+                + u64::from(r.triangle_count) * 12
+                + texels * 16 / 3
+        })
+    }
+
+    /// Fetched patches, in arrival order, for decode workers: as many as keep at most
+    /// `max_jobs` at the workers and their decoded bytes ([`Fetcher::job_bytes`]) at most
+    /// `max_bytes` (one at least, when none is there); each node and its job's message
+    /// ([`crate::wire::Job`]: what decoding needs from the node record, then the
+    /// patch's bytes). Each is answered with [`Fetcher::deliver`], or given back with
+    /// [`Fetcher::requeue`] when its worker failed.
+    pub fn take_jobs(
+        &mut self,
+        max_jobs: usize,
+        max_bytes: u64,
+        mips: bool,
+    ) -> Vec<(u32, Vec<u8>)> {
         let mut out = Vec::new();
-        while out.len() < max {
-            let Some(f) = self.ready.pop_front() else {
+        while self.at_workers < max_jobs {
+            let Some(f) = self.ready.front() else { break };
+            let cost = self.job_bytes(f.node);
+            if self.at_workers > 0 && self.at_workers_bytes + cost > max_bytes {
                 break;
-            };
+            }
+            let f = self.ready.pop_front().expect("front checked");
             match crate::wire::Job::of(&self.index, f.node, mips) {
                 Ok(job) => {
                     self.at_workers += 1;
+                    self.at_workers_bytes += cost;
                     out.push((f.node, job.to_bytes(&f.body[f.at])));
                 }
                 Err(e) => {
@@ -314,6 +341,11 @@ impl Fetcher {
         out
     }
 
+    fn job_done(&mut self, node: u32) {
+        self.at_workers = self.at_workers.saturating_sub(1);
+        self.at_workers_bytes = self.at_workers_bytes.saturating_sub(self.job_bytes(node));
+    }
+
     /// A decode worker's answer for a node of [`Fetcher::take_jobs`], the worker's
     /// milliseconds, and this thread's for taking the reply in: taken by the next
     /// [`Fetcher::drain_settled`] (or [`Fetcher::drain`]).
@@ -323,7 +355,7 @@ impl Fetcher {
             | Answer::Failed { node, .. }
             | Answer::Unavailable { node, .. } => *node,
         };
-        self.at_workers = self.at_workers.saturating_sub(1);
+        self.job_done(node);
         self.busy.remove(&node);
         self.wanted.remove(&node);
         self.stats.decoded += 1;
@@ -337,7 +369,7 @@ impl Fetcher {
     /// Gives back a job whose worker failed (its message as taken): decoded by the next
     /// [`Fetcher::drain`] on this thread, first.
     pub fn requeue(&mut self, node: u32, job: Vec<u8>) {
-        self.at_workers = self.at_workers.saturating_sub(1);
+        self.job_done(node);
         let body = match crate::wire::Job::parse(&job) {
             Ok((_, bytes)) => bytes.to_vec(),
             Err(_) => Vec::new(),
@@ -519,5 +551,134 @@ impl Fetcher {
             }
         }
         n
+    }
+}
+
+/// The leaf patches one full-resolution pick needs, fetched as it goes: a
+/// [`PatchReader`](tessera_format::PatchReader) over the patches fetched so far for
+/// [`tessera_pick::pick_with`]. A pass ([`PickReader::attempt`]) that reaches patches it
+/// lacks records the first batch of them and answers the ranges to fetch; the pick
+/// runs again once they are [`PickReader::insert`]ed, until a pass lacks nothing. The
+/// walk is best first, so each pass fetches only the next batch the ray needs.
+pub struct PickReader {
+    index: Arc<ModelIndex>,
+    bytes: std::sync::Mutex<FxHashMap<u32, Vec<u8>>>,
+    missing: std::sync::Mutex<Option<Vec<u32>>>,
+}
+
+/// What one pass of a [`PickReader`] came to.
+#[derive(Debug)]
+pub enum PickAttempt {
+    Done(Option<tessera_pick::Hit>, tessera_pick::PickStats),
+    /// Fetch these ranges (each with the nodes whose patches it holds, in file order)
+    /// and run again.
+    Need(Vec<(Range<u64>, Vec<u32>)>),
+}
+
+impl PickReader {
+    /// A pick over `index` with nothing fetched yet.
+    pub fn new(index: Arc<ModelIndex>) -> PickReader {
+        PickReader {
+            index,
+            bytes: Default::default(),
+            missing: Default::default(),
+        }
+    }
+
+    /// Bytes of patches held.
+    pub fn held_bytes(&self) -> u64 {
+        self.bytes
+            .lock()
+            .unwrap()
+            .values()
+            .map(|b| b.len() as u64)
+            .sum()
+    }
+
+    /// One pass of the pick along `ray` (model coordinates).
+    pub fn attempt(&self, ray: &tessera_pick::Ray) -> Result<PickAttempt, tessera_pick::PickError> {
+        *self.missing.lock().unwrap() = None;
+        let (hit, stats) =
+            tessera_pick::pick_with(self, ray, &tessera_pick::PickOptions::default())?;
+        let Some(mut nodes) = self.missing.lock().unwrap().take() else {
+            return Ok(PickAttempt::Done(hit, stats));
+        };
+        // Coalesced as the patch requests: neighbours in the file, small gaps.
+        let range_of = |n: u32| self.index.patch_range(n as usize).ok();
+        nodes.retain(|&n| range_of(n).is_some());
+        nodes.sort_by_key(|&n| range_of(n).map(|r| r.start));
+        let mut out: Vec<(Range<u64>, Vec<u32>)> = Vec::new();
+        for n in nodes {
+            let r = range_of(n).expect("kept above");
+            match out.last_mut() {
+                Some((span, members))
+                    if r.start >= span.end
+                        && r.start - span.end <= COALESCE_MAX_GAP
+                        && r.end - span.start <= COALESCE_MAX_BYTES =>
+                {
+                    span.end = r.end;
+                    members.push(n);
+                }
+                _ => out.push((r, vec![n])),
+            }
+        }
+        if out.is_empty() {
+            // Only nodes without a patch range were lacking: nothing more to fetch.
+            return Ok(PickAttempt::Done(hit, stats));
+        }
+        Ok(PickAttempt::Need(out))
+    }
+
+    /// The body of a range [`PickReader::attempt`] asked for, starting at byte `start`
+    /// of the file, holding the patches of `nodes`.
+    pub fn insert(&self, start: u64, body: &[u8], nodes: &[u32]) {
+        let mut bytes = self.bytes.lock().unwrap();
+        for &n in nodes {
+            let Ok(r) = self.index.patch_range(n as usize) else {
+                continue;
+            };
+            let (a, b) = ((r.start - start) as usize, (r.end - start) as usize);
+            if r.start >= start && b <= body.len() {
+                bytes.insert(n, body[a..b].to_vec());
+            }
+        }
+    }
+}
+
+impl tessera_format::PatchReader for PickReader {
+    fn index(&self) -> &ModelIndex {
+        &self.index
+    }
+
+    fn decode_patch(&self, i: usize) -> Result<tessera_format::PatchData, FormatError> {
+        self.decode_patches(&[i])
+            .pop()
+            .expect("one answer per node")
+    }
+
+    fn decode_patches(
+        &self,
+        nodes: &[usize],
+    ) -> Vec<Result<tessera_format::PatchData, FormatError>> {
+        let bytes = self.bytes.lock().unwrap();
+        let absent: Vec<u32> = nodes
+            .iter()
+            .map(|&n| n as u32)
+            .filter(|n| !bytes.contains_key(n))
+            .collect();
+        let mut missing = self.missing.lock().unwrap();
+        if !absent.is_empty() && missing.is_none() {
+            *missing = Some(absent);
+        }
+        nodes
+            .iter()
+            .map(|&n| match bytes.get(&(n as u32)) {
+                Some(b) => self.index.decode_patch(n, b),
+                None => Err(FormatError::io(
+                    "remote model",
+                    std::io::Error::other(format!("patch {n} not fetched yet")),
+                )),
+            })
+            .collect()
     }
 }

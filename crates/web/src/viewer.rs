@@ -32,9 +32,12 @@ use crate::plan::{Attempt, Fetcher, SparseBytes, PREFIX_BYTES};
 /// milliseconds: when the page gives no decode workers ([`Viewer::set_decoder`]) or
 /// they failed; the per-patch cost is in the statistics (`decode_ms_mean`).
 const DECODE_BUDGET_MS: f64 = 6.0;
-/// Jobs given to each decode worker at once (one decoding, one waiting, so a worker
-/// never idles between replies).
-const JOBS_PER_WORKER: usize = 2;
+/// Jobs at each decode worker at most: enough that small patches (a fraction of a
+/// millisecond each) keep it busy between two replies taken in.
+const JOBS_PER_WORKER: usize = 32;
+/// Decoded bytes of the jobs at the workers at most (their replies wait in memory until
+/// a frame takes them; a large textured patch goes alone).
+const JOB_BYTES: u64 = 48 << 20;
 /// Index pages read at open (as `tessera_http::TOP_PAGES`).
 const TOP_PAGES: u64 = 1;
 /// Root vertices kept to frame the home view (as the desktop viewer).
@@ -102,73 +105,101 @@ struct Remote {
     closed: Rc<Cell<bool>>,
     /// The roots, fetched and decoded while opening (answered by `read_now`).
     roots: Vec<Answer>,
-    /// The page's decode function (a job's bytes in, a promise of the reply's bytes:
-    /// `crate::wire`), how many jobs it takes at once, and whether it failed (then
-    /// decoding falls back to this thread, for good).
-    decoder: Option<(js_sys::Function, usize)>,
+    /// The page's decode workers, if any.
+    decoder: Option<Rc<Decoders>>,
+    /// Whether they failed (then decoding falls back to this thread, for good).
     workers_failed: Rc<Cell<bool>>,
     /// Make textures' mips in the workers (a textured model).
+    mips: bool,
+}
+
+/// The page's decode function (a job's bytes in, a promise of the reply's bytes:
+/// `crate::wire`) and how many workers run it.
+struct Decoders {
+    decode: js_sys::Function,
+    workers: usize,
+}
+
+/// What handing jobs to the workers needs, cloned into each callback.
+#[derive(Clone)]
+struct Dispatch {
+    decoders: Rc<Decoders>,
+    fetcher: Rc<RefCell<Fetcher>>,
+    failed: Rc<Cell<bool>>,
+    closed: Rc<Cell<bool>>,
     mips: bool,
 }
 
 impl Remote {
     /// Sends what the fetcher wants sent; each answer sends more.
     fn pump(&self) {
-        pump(&self.http, &self.fetcher, &self.fatal, &self.closed);
+        pump(
+            &self.http,
+            &self.fetcher,
+            &self.fatal,
+            &self.closed,
+            &self.dispatcher(),
+        );
     }
 
-    /// Hands fetched patches to the decode workers, as many as they take; each reply
-    /// is delivered to the fetcher when it comes (between frames).
-    fn dispatch(&self) {
-        let Some((decode, max_jobs)) = &self.decoder else {
-            return;
+    fn dispatcher(&self) -> Option<Dispatch> {
+        let decoders = self.decoder.clone()?;
+        Some(Dispatch {
+            decoders,
+            fetcher: self.fetcher.clone(),
+            failed: self.workers_failed.clone(),
+            closed: self.closed.clone(),
+            mips: self.mips,
+        })
+    }
+}
+
+/// Hands fetched patches to the decode workers, as many as they take
+/// ([`JOBS_PER_WORKER`], [`JOB_BYTES`]); each reply is delivered to the fetcher when it
+/// comes (taken by the next frame) and hands out more, as does each fetch completed, so
+/// the workers never wait for a frame.
+fn dispatch(d: &Dispatch) {
+    if d.failed.get() || d.closed.get() {
+        return;
+    }
+    let jobs =
+        d.fetcher
+            .borrow_mut()
+            .take_jobs(d.decoders.workers * JOBS_PER_WORKER, JOB_BYTES, d.mips);
+    for (node, job) in jobs {
+        let promise = match d
+            .decoders
+            .decode
+            .call1(&JsValue::NULL, &js_sys::Uint8Array::from(&job[..]))
+        {
+            Ok(p) => js_sys::Promise::resolve(&p),
+            Err(e) => {
+                workers_failed(&d.fetcher, &d.failed, node, job, format!("{e:?}"));
+                continue;
+            }
         };
-        if self.workers_failed.get() {
-            return;
-        }
-        let room = max_jobs.saturating_sub(self.fetcher.borrow().at_workers());
-        if room == 0 {
-            return;
-        }
-        let jobs = self.fetcher.borrow_mut().take_jobs(room, self.mips);
-        for (node, job) in jobs {
-            let promise = match decode.call1(&JsValue::NULL, &js_sys::Uint8Array::from(&job[..])) {
-                Ok(p) => js_sys::Promise::resolve(&p),
-                Err(e) => {
-                    workers_failed(
-                        &self.fetcher,
-                        &self.workers_failed,
-                        node,
-                        job,
-                        format!("{e:?}"),
-                    );
-                    continue;
-                }
+        let d = d.clone();
+        spawn_local(async move {
+            let r = wasm_bindgen_futures::JsFuture::from(promise).await;
+            if d.closed.get() {
+                return;
+            }
+            let t0 = now_ms();
+            let reply = match r {
+                Ok(v) => v
+                    .dyn_into::<js_sys::Uint8Array>()
+                    .map_err(|_| "a reply that is not bytes".to_string())
+                    .and_then(|a| crate::wire::read_reply(node, &JsBytes(a))),
+                Err(e) => Err(e.as_string().unwrap_or_else(|| format!("{e:?}"))),
             };
-            let (fetcher, failed, closed) = (
-                self.fetcher.clone(),
-                self.workers_failed.clone(),
-                self.closed.clone(),
-            );
-            spawn_local(async move {
-                let r = wasm_bindgen_futures::JsFuture::from(promise).await;
-                if closed.get() {
-                    return;
+            match reply {
+                Ok((answer, ms)) => {
+                    d.fetcher.borrow_mut().deliver(answer, ms, now_ms() - t0);
+                    dispatch(&d);
                 }
-                let t0 = now_ms();
-                let reply = match r {
-                    Ok(v) => v
-                        .dyn_into::<js_sys::Uint8Array>()
-                        .map_err(|_| "a reply that is not bytes".to_string())
-                        .and_then(|a| crate::wire::read_reply(node, &JsBytes(a))),
-                    Err(e) => Err(e.as_string().unwrap_or_else(|| format!("{e:?}"))),
-                };
-                match reply {
-                    Ok((answer, ms)) => fetcher.borrow_mut().deliver(answer, ms, now_ms() - t0),
-                    Err(why) => workers_failed(&fetcher, &failed, node, job, why),
-                }
-            });
-        }
+                Err(why) => workers_failed(&d.fetcher, &d.failed, node, job, why),
+            }
+        });
     }
 }
 
@@ -177,6 +208,7 @@ fn pump(
     fetcher: &Rc<RefCell<Fetcher>>,
     fatal: &Rc<RefCell<Option<String>>>,
     closed: &Rc<Cell<bool>>,
+    workers: &Option<Dispatch>,
 ) {
     if closed.get() || fatal.borrow().is_some() {
         return;
@@ -197,8 +229,13 @@ fn pump(
             );
             continue;
         }
-        let (http, fetcher, fatal, closed) =
-            (http.clone(), fetcher.clone(), fatal.clone(), closed.clone());
+        let (http, fetcher, fatal, closed, workers) = (
+            http.clone(),
+            fetcher.clone(),
+            fatal.clone(),
+            closed.clone(),
+            workers.clone(),
+        );
         spawn_local(async move {
             let r = http.get(req.range.clone(), false).await;
             if closed.get() {
@@ -213,7 +250,11 @@ fn pump(
                 Err(HttpError::Transient(m)) => Err(m),
             };
             fetcher.borrow_mut().complete(req.id, r);
-            pump(&http, &fetcher, &fatal, &closed);
+            // The fetched patches go to the workers now, not at the next frame.
+            if let Some(d) = &workers {
+                dispatch(d);
+            }
+            pump(&http, &fetcher, &fatal, &closed, &workers);
         });
     }
 }
@@ -256,8 +297,8 @@ impl PatchSource for Remote {
         self.pump();
     }
     fn poll(&mut self, out: &mut Vec<Answer>) {
-        if self.decoder.is_some() && !self.workers_failed.get() {
-            self.dispatch();
+        if let Some(d) = self.dispatcher().filter(|_| !self.workers_failed.get()) {
+            dispatch(&d);
             // The workers' answers; fetched patches wait for a worker.
             self.fetcher.borrow_mut().drain_settled(out);
         } else {
@@ -870,7 +911,7 @@ impl Viewer {
             // Main-thread time taking the workers' replies in (copies).
             "reply_ms_mean": if f.worker_decoded > 0 { f.reply_ms / f.worker_decoded as f64 } else { 0.0 },
             "reply_ms_max": f.reply_max_ms,
-            "decode_workers": self.source.decoder.as_ref().map_or(0, |d| d.1 / JOBS_PER_WORKER),
+            "decode_workers": self.source.decoder.as_ref().map_or(0, |d| d.workers),
             "workers_failed": self.source.workers_failed.get(),
             "decode_ms_mean": if main_decoded > 0 { f.decode_ms / main_decoded as f64 } else { 0.0 },
             "decode_ms_max": f.decode_max_ms,
@@ -993,7 +1034,12 @@ impl Viewer {
     /// many run at once. Without a decoder, or once it fails, patches are decoded on
     /// this thread between frames.
     pub fn set_decoder(&mut self, decode: js_sys::Function, workers: u32) {
-        self.source.decoder = (workers > 0).then(|| (decode, workers as usize * JOBS_PER_WORKER));
+        self.source.decoder = (workers > 0).then(|| {
+            Rc::new(Decoders {
+                decode,
+                workers: workers as usize,
+            })
+        });
     }
 
     /// The canvas was resized to `width` x `height` pixels.
@@ -1132,6 +1178,67 @@ impl Viewer {
     pub fn recentre_at(&mut self, x: f64, y: f64) {
         self.request_pick(x, y, Purpose::Recentre);
         self.dirty = true;
+    }
+
+    /// The point of the model's full-resolution surface under (`x`, `y`) canvas pixels
+    /// (the ray through that pixel's centre), whatever is drawn: the leaf patches under
+    /// the ray fetched batch by batch as the best-first walk reaches them
+    /// ([`crate::plan::PickReader`], `tessera_pick`, the desktop's pick). A promise of
+    /// the hit's JSON (`point`, `normal`: model coordinates; `distance` from the eye;
+    /// `node`, `triangle`; `exact`: false when the index read so far shows no deeper
+    /// level there or a patch could not be read; `passes`, `patches`, `bytes` fetched;
+    /// `ms`), or `null` when the ray misses the model.
+    pub fn pick(&self, x: f64, y: f64) -> js_sys::Promise {
+        let camera = self.nav.camera();
+        let ray = tessera_pick::Ray::through_pixel(&camera, x.floor() + 0.5, y.floor() + 0.5);
+        let reader = crate::plan::PickReader::new(self.index.clone());
+        let http = self.source.http.clone();
+        let closed = self.source.closed.clone();
+        wasm_bindgen_futures::future_to_promise(async move {
+            let t0 = now_ms();
+            let fail = |m: String| JsValue::from(js_sys::Error::new(&format!("pick: {m}")));
+            let mut fetched = 0usize;
+            for pass in 1..=64u32 {
+                if closed.get() {
+                    return Err(fail("the view was disposed".into()));
+                }
+                let attempt = reader.attempt(&ray).map_err(|e| fail(e.to_string()))?;
+                match attempt {
+                    crate::plan::PickAttempt::Done(hit, stats) => {
+                        let Some(h) = hit else {
+                            return Ok(JsValue::NULL);
+                        };
+                        let v = json!({
+                            "point": h.point,
+                            "normal": h.normal,
+                            "distance": h.distance,
+                            "node": h.node,
+                            "triangle": h.triangle,
+                            "exact": h.exact,
+                            "passes": pass,
+                            "patches": fetched,
+                            "bytes": reader.held_bytes(),
+                            "skipped": stats.skipped.len(),
+                            "ms": now_ms() - t0,
+                        });
+                        return js_sys::JSON::parse(&v.to_string());
+                    }
+                    crate::plan::PickAttempt::Need(ranges) => {
+                        for (range, nodes) in ranges {
+                            let body = http
+                                .get(range.clone(), false)
+                                .await
+                                .map_err(|e| fail(e.message().to_string()))?;
+                            fetched += nodes.len();
+                            reader.insert(range.start, &body, &nodes);
+                        }
+                    }
+                }
+            }
+            Err(fail(
+                "the ray crosses more patches than a pick reads".into(),
+            ))
+        })
     }
 
     /// Asks for the point drawn under (`x`, `y`) canvas pixels (the depth of the last

@@ -196,7 +196,7 @@ impl PatchSource for Fake<'_> {
             }
         }
         if self.workers {
-            let jobs = self.fetcher.take_jobs(8, true);
+            let jobs = self.fetcher.take_jobs(8, 64 << 20, true);
             self.jobs.extend(jobs);
             self.fetcher.drain_settled(out);
         } else {
@@ -404,4 +404,66 @@ thread_local! {
 
 fn fake_clock() -> f64 {
     CLOCK.with(|c| c.get())
+}
+
+/// A full-resolution pick through [`PickReader`] (patches fetched batch by batch as the
+/// walk reaches them) finds exactly the hit of the pick over the whole file, fetching a
+/// few batches of the leaves under the ray, not the model.
+#[test]
+fn a_pick_fetching_as_it_goes_equals_the_pick_over_the_whole_file() {
+    use tessera_web::plan::{PickAttempt, PickReader};
+    let dir = tempfile::tempdir().unwrap();
+    let file = model(dir.path());
+    let path = dir.path().join("copy.tsr");
+    std::fs::write(&path, &file).unwrap();
+    let whole = tessera_format::Model::open(&path).unwrap();
+    let index = Arc::new(ModelIndex::read(file.as_slice()).unwrap());
+    let leaves = index
+        .nodes()
+        .iter()
+        .filter(|n| n.children.iter().all(|&c| c == tessera_format::NO_NODE))
+        .count();
+    let cam = camera(&index);
+    let mut hits = 0;
+    for (x, y) in [
+        (320.5, 240.5),
+        (300.5, 200.5),
+        (400.5, 300.5),
+        (5.5, 5.5),
+        (250.5, 260.5),
+    ] {
+        let ray = tessera_pick::Ray::through_pixel(&cam, x, y);
+        let (want, _) = tessera_pick::pick(&whole, &ray).unwrap();
+        let reader = PickReader::new(index.clone());
+        let (mut rounds, mut fetched) = (0, 0);
+        let got = loop {
+            rounds += 1;
+            assert!(rounds < 64, "the pick does not end");
+            match reader.attempt(&ray).unwrap() {
+                PickAttempt::Done(hit, stats) => {
+                    assert!(stats.skipped.is_empty(), "{stats:?}");
+                    break hit;
+                }
+                PickAttempt::Need(ranges) => {
+                    for (r, nodes) in ranges {
+                        assert!(
+                            r.end - r.start <= tessera_web::plan::COALESCE_MAX_BYTES
+                                || nodes.len() == 1
+                        );
+                        fetched += nodes.len();
+                        reader.insert(r.start, &file[r.start as usize..r.end as usize], &nodes);
+                    }
+                }
+            }
+        };
+        assert_eq!(got, want, "pixel ({x}, {y})");
+        if let Some(h) = got {
+            hits += 1;
+            assert!(h.exact);
+            assert!(fetched < leaves / 2, "{fetched} of {leaves} leaves fetched");
+        }
+        eprintln!("pick at ({x}, {y}): {rounds} passes, {fetched} patches fetched of {leaves} leaves, {} bytes held, hit {:?}", reader.held_bytes(), got.map(|h| h.point));
+    }
+    assert!(hits >= 3, "the rays miss the model");
+    assert!(hits < 5, "the corner ray should miss");
 }
