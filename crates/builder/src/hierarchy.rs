@@ -394,6 +394,7 @@ impl Ctx<'_> {
         drop(raw);
         lap.mark(Phase::Morph);
         let mut child_err = 0.0f64;
+        let mut kid_texels = 0u64;
         let mut balls = Vec::new();
         let target_uv = self
             .baker
@@ -420,6 +421,7 @@ impl Ctx<'_> {
                 .get(id)
                 .ok_or_else(|| self.internal_err("child info missing"))?;
             child_err = child_err.max(n.error);
+            kid_texels += u64::from(n.texture_size[0]) * u64::from(n.texture_size[1]);
             balls.push(n.sat);
         }
         lap.mark(Phase::Emit);
@@ -461,6 +463,20 @@ impl Ctx<'_> {
             }
             tights.push(s);
         }
+        // Textured models: raised until the parts' textures fit their texel budget, so
+        // that a coarse patch is refined before its texels show (issue 11). Raised here,
+        // before the error is stored, so that it is saturated like the rest: the parent
+        // adds it to its own through `child_err`, and the diamond's mates share it.
+        let error = match &self.baker {
+            Some(b) => {
+                let plans = parts
+                    .iter()
+                    .map(|p| b.plan(&p.vertices, &p.indices, self.step))
+                    .collect::<Result<Vec<_>, _>>()?;
+                crate::texture::budgeted_error(&plans, error, kid_texels)
+            }
+            None => error,
+        };
         lap.mark(Phase::Optimize);
         let sat = stored(&Sphere::of_balls(&balls), grid.size);
         let diamond_id = self.diamond_ids.fetch_add(1, Ordering::Relaxed);
