@@ -32,7 +32,7 @@
 // toward the point under the cursor, a double-click moves the pivot onto it.
 // Touch (Pointer Events, the canvas's touch-action set to none so the page does not
 // scroll): one finger orbits, two fingers pinch to zoom (about the point under their
-// centre) and drag to pan.
+// centre) and drag to pan, a double tap recentres on the point under it.
 
 import init, { Viewer } from './tessera_web.js';
 
@@ -216,6 +216,10 @@ export class View extends EventTarget {
   // two fingers of a pinch move together: their separate events would pan back and
   // forth between them).
   #touchMoved = false;
+  // Taps, for a double tap (recentre, as a double-click): where and when the current
+  // one-finger touch began, and the last tap (position, end time).
+  #tapStart = null;
+  #lastTap = null;
   // pointAt() calls waiting for their answer (id -> resolve).
   #pointQueries = new Map();
   #nextQuery = 1;
@@ -450,6 +454,28 @@ export class View extends EventTarget {
     g.spread = spread;
   }
 
+  // A one-finger touch that ended where it began, soon: a tap; two taps close in time
+  // and place: a double tap, which recentres on the point under it (a double-click).
+  #tap(e) {
+    const start = this.#tapStart;
+    this.#tapStart = null;
+    if (!start || e.type !== 'pointerup' || this.#touches.size) return;
+    const [x, y] = this.#pixels(e);
+    const slop = 12 * (window.devicePixelRatio || 1);
+    if (Math.hypot(x - start.x, y - start.y) > slop || e.timeStamp - start.t > 300) {
+      this.#lastTap = null;
+      return;
+    }
+    const last = this.#lastTap;
+    if (last && e.timeStamp - last.t < 400 && Math.hypot(x - last.x, y - last.y) < 3 * slop) {
+      this.#lastTap = null;
+      this.#viewer.recentre_at(x, y);
+      this.dispatchEvent(new CustomEvent('interact'));
+    } else {
+      this.#lastTap = { x, y, t: e.timeStamp };
+    }
+  }
+
   #bindInput() {
     const c = this.#canvas;
     // No scrolling or browser zoom on the canvas: touches are the view's.
@@ -461,6 +487,7 @@ export class View extends EventTarget {
       if (e.pointerType === 'touch') {
         this.#touchMove(); // the moves so far, with the fingers they were made by
         this.#touches.set(e.pointerId, [x, y]);
+        this.#tapStart = this.#touches.size === 1 ? { x, y, t: e.timeStamp } : null;
         this.#touchRestart();
       } else {
         this.#viewer.pointer_down(e.button, x, y, e.shiftKey);
@@ -487,6 +514,7 @@ export class View extends EventTarget {
           this.#touchMove();
           this.#touches.delete(e.pointerId);
           this.#touchRestart();
+          this.#tap(e);
         }
       } else {
         this.#viewer.pointer_up();

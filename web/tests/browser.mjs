@@ -17,12 +17,16 @@
 // Save PNG button clicked and its download saved there), "touch" (with "touch": true:
 // the cameras before and after a one-finger drag, a two-finger pinch and a two-finger
 // drag, dispatched as CDP touch events, each waited to idle; the point drawn under the
-// pinch's centre before it, in canvas pixels "pinch_at"; the canvas's touch-action
+// pinch's centre before it, in canvas pixels "pinch_at"; a double tap at "tap_at", the
+// point drawn there before it "tap_point" and the camera after "tapped"; the canvas's touch-action
 // and the page's scroll offset), "pick" (with "pick": {"centre": [x, y], "off": [[x, y],
 // ...]} in canvas pixels: pointAt and the full-resolution pick() of the centre ("full"),
 // then a double-click there and the
 // camera once idle again; then the first "off" pixel with a point under it, a wheel
-// step there, the cameras before and after and pointAt of that pixel after)}].
+// step there, the cameras before and after and pointAt of that pixel after), "measure"
+// (with "measure": {"size": [w, h], "pixels": [[x, y], ...], "shot": PATH}: index.html's
+// Measure button, a click on each canvas pixel, each waited for; the camera, the points
+// and distance of window.tesseraMeasure, the HUD's text, a page screenshot)}].
 // "cycles" (with "cycles": {"count", "model", "size": [w, h], "gc" (default true: collect
 // and measure after every cycle, not only the last), "keep" (the negative control: the
 // disposed canvases kept referenced)} on a page that runs nothing
@@ -337,11 +341,21 @@ for (const visit of plan.visits) {
       const pinch_point = await page.evaluate(([x, y]) => window.tesseraView.pointAt(x, y), pinch_at);
       const pinch = await gesture([[-100, 30], [-20, 30]], [[-180, 30], [60, 30]]);
       const pan = await gesture([[-50, 0], [50, 0]], [[30, 40], [130, 40]]);
+      // A double tap off the centre (+40, -20): the point drawn there first, then two
+      // quick taps, then the camera once idle (recentred on it).
+      const tap_at = [box.width / 2 + 40, box.height / 2 - 20];
+      const tap_point = await page.evaluate(([x, y]) => window.tesseraView.pointAt(x, y), tap_at);
+      for (let i = 0; i < 2; i++) {
+        await cdp.send('Input.dispatchTouchEvent', { type: 'touchStart', touchPoints: [{ x: box.x + tap_at[0], y: box.y + tap_at[1], id: 0 }] });
+        await cdp.send('Input.dispatchTouchEvent', { type: 'touchEnd', touchPoints: [] });
+      }
+      await settle();
+      const tapped = await camera();
       const page_state = await page.evaluate(() => ({
         touchAction: getComputedStyle(document.getElementById('view')).touchAction,
         scroll: [window.scrollX, window.scrollY],
       }));
-      touch = { start, orbit, pinch, pan, pinch_at, pinch_point, ...page_state };
+      touch = { start, orbit, pinch, pan, pinch_at, pinch_point, tap_at, tap_point, tapped, ...page_state };
     } catch (e) {
       consoleLines.push(`driver: touch: ${e.message.split('\n')[0]}`);
     }
@@ -389,6 +403,29 @@ for (const visit of plan.visits) {
       consoleLines.push(`driver: pick: ${e.message.split('\n')[0]}`);
     }
   }
+  // Optional: the page's Measure tool (index.html): the button, then a click on each
+  // of the canvas pixels given; the camera, the measured points and distance, and a
+  // screenshot of the page (the overlay with them) to "measure_shot".
+  let measure = null;
+  if (visit.measure && outcome === 'idle') {
+    try {
+      const box = await page.locator('#view').boundingBox();
+      const size = visit.measure.size;
+      const client = ([x, y]) => [box.x + ((x + 0.5) * box.width) / size[0], box.y + ((y + 0.5) * box.height) / size[1]];
+      await page.click('#measure');
+      const camera = await page.evaluate(() => window.tesseraView.camera());
+      for (const [i, px] of visit.measure.pixels.entries()) {
+        await page.mouse.click(...client(px));
+        await page.waitForFunction((n) => window.tesseraMeasure && window.tesseraMeasure.points.length === n, i + 1, { timeout: 30000, polling: 50 });
+      }
+      const result = await page.evaluate(() => window.tesseraMeasure);
+      const text = await page.evaluate(() => document.getElementById('measure-text').textContent);
+      if (visit.measure.shot) await page.screenshot({ path: visit.measure.shot });
+      measure = { camera, ...result, text, camera_after: await page.evaluate(() => window.tesseraView.camera()) };
+    } catch (e) {
+      consoleLines.push(`driver: measure: ${e.message.split('\n')[0]}`);
+    }
+  }
   // Optional: the module's screenshot() and the page's Save PNG button, once idle.
   let shot = null;
   if ((visit.api_shot || visit.download) && outcome === 'idle') {
@@ -433,7 +470,7 @@ for (const visit of plan.visits) {
   if (visit.screenshot && outcome === visit.expect && !visit.drop) {
     await page.locator('#view').screenshot({ path: visit.screenshot });
   }
-  results.push({ name: visit.name, outcome, ms, ...state, interaction, shot, touch, pick, cycles, drop, console: consoleLines });
+  results.push({ name: visit.name, outcome, ms, ...state, interaction, shot, touch, pick, measure, cycles, drop, console: consoleLines });
   await context.close();
 }
 await browser.close();

@@ -391,6 +391,61 @@ fn pick_checks(r: &Value, mesh_path: &Path) {
     );
 }
 
+/// The page's Measure tool (browser.mjs "measure"): each clicked point is where the
+/// pixel's ray meets the input mesh (a full-resolution pick), and the distance shown is
+/// theirs.
+fn measure_checks(r: &Value, mesh_path: &Path) {
+    let m = &r["measure"];
+    assert!(m.is_object(), "no measure result: {r:#}");
+    let cam = Camera::from_json_value(&m["camera"]).unwrap();
+    assert_eq!(
+        m["camera_after"], m["camera"],
+        "measuring moved the view: {m:#}"
+    );
+    let (vertices, triangles) = load_mesh(mesh_path);
+    let on_mesh: Vec<[f64; 3]> = [(WIDTH / 2, HEIGHT / 2), (WIDTH / 2 - 40, HEIGHT / 2 + 25)]
+        .iter()
+        .map(|&(x, y)| {
+            let (eye, dir) = pixel_ray(&cam, f64::from(x) + 0.5, f64::from(y) + 0.5);
+            let t = nearest_hit(eye, dir, &vertices, &triangles)
+                .expect("a measured pixel misses the mesh");
+            std::array::from_fn(|i| eye[i] + dir[i] * t)
+        })
+        .collect();
+    let dist = |a: [f64; 3], b: [f64; 3]| (0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f64>().sqrt();
+    let points: Vec<[f64; 3]> = m["points"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| std::array::from_fn(|i| p[i].as_f64().unwrap()))
+        .collect();
+    assert_eq!(points.len(), 2, "{m:#}");
+    let want = dist(on_mesh[0], on_mesh[1]);
+    let got = m["distance"].as_f64().unwrap();
+    let off = dist(points[0], on_mesh[0]).max(dist(points[1], on_mesh[1]));
+    eprintln!(
+        "measure: {got:.6} model units between the two clicked points ({want:.6} on the input mesh; points within {off:.2e} of it); HUD {:?}",
+        m["text"]
+    );
+    // One pixel at the first point's depth: the points are full-resolution picks, so
+    // within a small part of it (the model's grid), unlike the drawn cut's depth.
+    let pixel =
+        2.0 * dist(on_mesh[0], cam.position) * (0.5 * cam.fov_y_rad()).tan() / f64::from(HEIGHT);
+    assert!(
+        off < 0.1 * pixel,
+        "a measured point is {off:.2e} off the mesh (1 px = {pixel:.2e}): {m:#}"
+    );
+    assert!(
+        (got - want).abs() <= 2.0 * off + 1e-12,
+        "measured {got}, the mesh gives {want}"
+    );
+    let text = m["text"].as_str().unwrap_or("");
+    assert!(
+        text.contains(&format!("{:.4}", got)[..5]),
+        "the HUD does not show the distance: {text:?}"
+    );
+}
+
 fn pixel_ray(c: &Camera, x: f64, y: f64) -> ([f64; 3], [f64; 3]) {
     let b = c.basis();
     let tan_y = (0.5 * c.fov_y_rad()).tan();
@@ -565,7 +620,9 @@ fn the_page_shows_the_model_as_tessera_render_and_errors_clearly() {
         {"name": "pick", "url": format!("{base}/?model=/models/bunny.tsr#camera={}", encode(&camera_a)),
          "expect": "idle", "timeout_ms": 120000, "viewport": [800, 480],
          "pick": {"size": [WIDTH, HEIGHT], "centre": [WIDTH / 2, HEIGHT / 2],
-                  "off": [[150, 250], [170, 220], [300, 120], [200, 140], [280, 230]]}},
+                  "off": [[150, 250], [170, 220], [300, 120], [200, 140], [280, 230]]},
+         "measure": {"size": [WIDTH, HEIGHT], "pixels": [[WIDTH / 2, HEIGHT / 2], [WIDTH / 2 - 40, HEIGHT / 2 + 25]],
+                     "shot": dir.join("measure.png")}},
         {"name": "touch", "url": format!("{base}/embed.html?model=/models/bunny.tsr"), "expect": "idle",
          "timeout_ms": 120000, "viewport": [800, 600], "touch": true},
         {"name": "404", "url": format!("{base}/?model=/models/nope.tsr"), "expect": "error",
@@ -713,7 +770,28 @@ fn the_page_shows_the_model_as_tessera_render_and_errors_clearly() {
     );
     assert_eq!(t["touchAction"], "none", "{t:#}");
     assert_eq!(t["scroll"], json!([0, 0]), "the page scrolled: {t:#}");
+    // A double tap recentres on the point drawn under it, as a double-click: the pivot
+    // moves onto it, the view does not turn.
+    let tap: [f64; 3] = std::array::from_fn(|i| {
+        t["tap_point"][i]
+            .as_f64()
+            .expect("nothing under the double tap")
+    });
+    let tapped = &t["tapped"];
+    let to_tap = len(std::array::from_fn(|i| vec3(tapped, "target")[i] - tap[i]));
+    let turn = angle_deg(off(pan), off(tapped));
+    eprintln!(
+        "double tap: the pivot is {to_tap:.2e} from the point tapped (it moved {:.2e}); the view turned {turn:.4} deg",
+        moved(pan, tapped)
+    );
+    assert!(
+        to_tap < 1e-6 * len(off(tapped)).max(1e-9),
+        "the double tap did not recentre on the point: {t:#}"
+    );
+    assert!(moved(pan, tapped) > 0.01 * len(off(pan)), "{t:#}");
+    assert!(turn < 1e-3, "the double tap turned the view: {turn} deg");
     pick_checks(by("pick"), &bunny);
+    measure_checks(by("pick"), &bunny);
     let shown = |name: &str, needle: &str| {
         let r = by(name);
         assert_eq!(r["outcome"], "error", "{name}: {r:#}");
