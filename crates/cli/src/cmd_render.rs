@@ -69,6 +69,10 @@ pub struct Args {
     /// smoothly from its parent's shape to its own; see docs/morph.md).
     #[arg(long)]
     no_morph: bool,
+    /// Textured models: morph the geometry only (by default a patch morphing in from its
+    /// parent's shape also shows its parent's texel detail and sharpens as it morphs).
+    #[arg(long)]
+    no_texel_blend: bool,
     /// Draw frame i with the cut and morph ratios selected for the camera of frame
     /// i - N (its own camera otherwise): rendered beside a normal run, the difference is
     /// what the selection update alone changes, i.e. popping (0: off).
@@ -135,6 +139,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
             arrival_blend_s: a.arrival_blend,
             ..Default::default()
         },
+        texel_blend: !a.no_texel_blend,
         read_delay: (a.read_delay_ms > 0)
             .then(|| std::time::Duration::from_millis(a.read_delay_ms)),
         ..Default::default()

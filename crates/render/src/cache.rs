@@ -246,7 +246,7 @@ pub fn gpu_vertices_as(
 }
 
 /// Where a resident patch lives.
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct Slot {
     /// Vertex range (in vertices) in the vertex buffer: draw with `base_vertex = start`.
     pub vertices: Range<u32>,
@@ -257,6 +257,15 @@ pub struct Slot {
     /// Textured patches: the patch texture, drawn through the textured pipeline
     /// (bind group 1); None for patches of models without textures.
     pub texture: Option<SlotTexture>,
+    /// Textured patches: the model-space size of a texel of the patch texture (over
+    /// its textured triangles), 0 when unknown.
+    pub texel_size: f32,
+    /// Textured patches: mip levels between this patch's texels and its parent's
+    /// (`log2(parent texel / own texel)`, 0..8; 0 when unknown). Drawn at morph ratio
+    /// `r`, the texture is sampled no finer than level `r * texel_lod`, so a patch that
+    /// morphs in from its parent's shape also shows its parent's texel detail, and
+    /// sharpens as it morphs (no texture pop at a switch).
+    pub texel_lod: f32,
 }
 
 impl Slot {
@@ -293,6 +302,9 @@ pub struct GpuCache {
     /// Per model: the level of each node (for the vertex tags); see
     /// [`GpuCache::set_levels`].
     levels: Vec<Vec<u8>>,
+    /// Per model: each node's parent and the parent's error ([`GpuCache::set_nodes`]),
+    /// for the texel detail a patch morphs from.
+    parents: Vec<Vec<(u32, f32)>>,
     /// Per model: whether it is textured ([`GpuCache::set_textured`]).
     textured: Vec<bool>,
     /// The texture layout, sampler and grey stand-in, made at the first textured upload.
@@ -465,6 +477,7 @@ impl GpuCache {
             stats: GpuCacheStats::default(),
             per_model: Vec::new(),
             levels: Vec::new(),
+            parents: Vec::new(),
             textured: Vec::new(),
             kit: None,
             total: 0,
@@ -634,6 +647,54 @@ impl GpuCache {
 
     /// The level of every node of `model` (its index's nodes in order), for the tags
     /// of the vertices uploaded from now on. Nodes without one are tagged level 0.
+    /// Takes `model`'s node table from its index: each node's level (as
+    /// [`GpuCache::set_levels`]) and its parent and the parent's error (the texel detail
+    /// a textured patch morphs from: [`Slot::texel_lod`]).
+    pub fn set_nodes(&mut self, model: u32, index: &tessera_format::ModelIndex) {
+        let nodes = index.nodes();
+        self.set_levels(model, nodes.iter().map(|n| n.level).collect());
+        let m = model as usize;
+        if self.parents.len() <= m {
+            self.parents.resize_with(m + 1, Vec::new);
+        }
+        self.parents[m] = nodes
+            .iter()
+            .map(|n| {
+                let e = nodes.get(n.parent as usize).map_or(0.0, |p| p.error);
+                (n.parent, e)
+            })
+            .collect();
+    }
+
+    /// The texel detail a textured patch of `texel_size` morphs from: mip levels
+    /// between it and its parent's texels (the parent's slot's when resident, else the
+    /// texel its error allows: the builder's coarsest texel at most the error, a level
+    /// of which lies between half the error and the error).
+    fn texel_lod(&self, model: u32, node: u32, texel_size: f32) -> f32 {
+        let Some(&(parent, error)) = self
+            .parents
+            .get(model as usize)
+            .and_then(|p| p.get(node as usize))
+        else {
+            return 0.0;
+        };
+        if parent == tessera_format::NO_NODE || texel_size <= 0.0 {
+            return 0.0;
+        }
+        let parent_texel = self
+            .slots
+            .get(&slot_key(model, parent))
+            .map(|s| s.texel_size)
+            .filter(|&t| t > 0.0)
+            .unwrap_or(error * std::f32::consts::FRAC_1_SQRT_2);
+        let l = (parent_texel / texel_size).log2();
+        if l.is_finite() {
+            l.clamp(0.0, 8.0)
+        } else {
+            0.0
+        }
+    }
+
     pub fn set_levels(&mut self, model: u32, levels: Vec<u8>) {
         let m = model as usize;
         if self.levels.len() <= m {
@@ -836,11 +897,17 @@ impl GpuCache {
         self.scratch = verts;
         self.indices
             .write(queue, indices.start, bytemuck::cast_slice(&patch.indices));
+        let texel_size = match (&texture, &patch.texture) {
+            (Some(_), Some(t)) => patch_texel_size(patch, t.width, t.height, quant_step),
+            _ => 0.0,
+        };
         let slot = Slot {
             vertices,
             indices,
             tag: vertex_tag(model, node, level),
             texture,
+            texel_size,
+            texel_lod: self.texel_lod(model, node, texel_size),
         };
         let bytes = slot.bytes();
         self.stats.resident_bytes += bytes;
@@ -891,6 +958,55 @@ impl GpuCache {
             m.evictions += 1;
             m.resident_patches -= 1;
         }
+    }
+}
+
+/// The model-space size of a texel of `patch`'s `width` x `height` texture: the square
+/// root of the model area over the texel area of its textured triangles (each vertex's
+/// uv mapped through its chart); 0 without such triangles.
+pub fn patch_texel_size(patch: &PatchData, width: u32, height: u32, quant_step: f64) -> f32 {
+    let n = patch.positions.len();
+    if patch.uvs.len() != n || patch.chart_ids.len() != n || width == 0 || height == 0 {
+        return 0.0;
+    }
+    let (mut model_area, mut texel_area) = (0.0f64, 0.0f64);
+    for t in patch.indices.chunks_exact(3) {
+        let [a, b, c] = [t[0], t[1], t[2]].map(|i| i as usize);
+        if a >= n || b >= n || c >= n {
+            continue;
+        }
+        let chart = patch.chart_ids[a];
+        let Some(ch) = patch.charts.get(chart as usize) else {
+            continue;
+        };
+        if ch.image == u32::MAX || patch.chart_ids[b] != chart || patch.chart_ids[c] != chart {
+            continue;
+        }
+        let p = [a, b, c].map(|i| patch.positions[i].map(|x| f64::from(x) * quant_step));
+        let e1 = [0, 1, 2].map(|k| p[1][k] - p[0][k]);
+        let e2 = [0, 1, 2].map(|k| p[2][k] - p[0][k]);
+        let cr = [
+            e1[1] * e2[2] - e1[2] * e2[1],
+            e1[2] * e2[0] - e1[0] * e2[2],
+            e1[0] * e2[1] - e1[1] * e2[0],
+        ];
+        model_area += 0.5 * (cr[0] * cr[0] + cr[1] * cr[1] + cr[2] * cr[2]).sqrt();
+        let u = [a, b, c].map(|i| {
+            let m = ch.map(patch.uvs[i]);
+            [
+                f64::from(m[0]) * f64::from(width),
+                f64::from(m[1]) * f64::from(height),
+            ]
+        });
+        texel_area += 0.5
+            * ((u[1][0] - u[0][0]) * (u[2][1] - u[0][1])
+                - (u[2][0] - u[0][0]) * (u[1][1] - u[0][1]))
+                .abs();
+    }
+    if model_area > 0.0 && texel_area > 0.0 {
+        (model_area / texel_area).sqrt() as f32
+    } else {
+        0.0
     }
 }
 

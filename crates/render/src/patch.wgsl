@@ -134,6 +134,8 @@ struct TexturedIn {
     @location(5) target_uv: vec2<f32>,
     @location(6) ratio: f32,
     @location(7) tag: u32,
+    // Per draw: mip levels between the patch's texels and its parent's.
+    @location(8) texel_lod: f32,
 }
 
 struct TexturedOut {
@@ -142,6 +144,9 @@ struct TexturedOut {
     // The colour by node or by level (unused in the natural mode: the texel is).
     @location(1) color: vec3<f32>,
     @location(2) uv: vec2<f32>,
+    // The finest mip level to sample: ratio * texel_lod (0 for a patch at its own
+    // shape), so a patch morphing in from its parent shows its parent's texel detail.
+    @location(3) @interpolate(flat) min_lod: f32,
 }
 
 @vertex
@@ -152,13 +157,23 @@ fn vs_textured(v: TexturedIn) -> TexturedOut {
     out.normal = morph_normal(v.normal, v.target_normal, r);
     out.uv = v.uv + (v.target_uv - v.uv) * r;
     out.color = mode_color(frame.clay.rgb, v.tag);
+    out.min_lod = r * v.texel_lod;
     return out;
 }
 
 @fragment
 fn fs_textured(f: TexturedOut) -> @location(0) vec4<f32> {
     // Sampled in uniform control flow; the mode picks by selection, as `mode_color`.
-    let texel = textureSample(patch_texture, patch_sampler, f.uv).rgb;
+    // The texture's own level of detail, from the uv's screen derivatives in texels,
+    // raised to `min_lod` by scaling the derivatives (a patch at its own shape samples
+    // with the true derivatives: exactly `textureSample`).
+    let size = vec2<f32>(textureDimensions(patch_texture, 0));
+    let dx = dpdx(f.uv);
+    let dy = dpdy(f.uv);
+    let rho = max(length(dx * size), length(dy * size));
+    let floor_rho = exp2(f.min_lod);
+    let k = select(1.0, floor_rho / max(rho, 1e-8), f.min_lod > 0.0 && rho < floor_rho);
+    let texel = textureSampleGrad(patch_texture, patch_sampler, f.uv, dx * k, dy * k).rgb;
     return shade(f.normal, select(texel, f.color, frame.mode.x > 0.5));
 }
 

@@ -35,7 +35,7 @@ struct FrameUniform {
     mode: [f32; 4],
 }
 
-/// Per-draw instance data: the drawn node's morph ratio and tag.
+/// Per-draw instance data: the drawn node's morph ratio, tag, and texel detail.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct DrawInstance {
@@ -43,6 +43,9 @@ pub struct DrawInstance {
     pub ratio: f32,
     /// [`crate::cache::vertex_tag`] of the node.
     pub tag: u32,
+    /// [`crate::cache::Slot::texel_lod`]: the textured pipeline samples no finer than
+    /// mip level `ratio * texel_lod`.
+    pub texel_lod: f32,
 }
 
 /// Where the light comes from.
@@ -200,9 +203,9 @@ const TEXTURED_VERTEX_ATTRIBUTES: [wgpu::VertexAttribute; 6] = wgpu::vertex_attr
     4 => Unorm16x2,
     5 => Unorm16x2
 ];
-/// Per draw (one instance): the node's morph ratio and tag.
-const INSTANCE_ATTRIBUTES: [wgpu::VertexAttribute; 2] =
-    wgpu::vertex_attr_array![6 => Float32, 7 => Uint32];
+/// Per draw (one instance): the node's morph ratio, tag and texel detail.
+const INSTANCE_ATTRIBUTES: [wgpu::VertexAttribute; 3] =
+    wgpu::vertex_attr_array![6 => Float32, 7 => Uint32, 8 => Float32];
 
 /// One patch pipeline of the shader: entry points, vertex attributes, polygon mode and
 /// depth bias (the fill, wireframe and textured pipelines differ only there).
@@ -295,6 +298,9 @@ pub struct Renderer {
     pub background: [f64; 4],
     /// Whether vertex colours are used (else a clay colour).
     pub has_colors: bool,
+    /// Whether a textured patch morphing in from its parent also shows its parent's
+    /// texel detail ([`crate::cache::Slot::texel_lod`]; true).
+    pub texel_blend: bool,
     /// Whether draws may start at a vertex offset (see [`Renderer::set_base_vertex`]).
     base_vertex: bool,
 }
@@ -385,6 +391,7 @@ impl Renderer {
             targets: None,
             background: [0.06, 0.07, 0.09, 1.0],
             has_colors: false,
+            texel_blend: true,
             base_vertex: true,
         }
     }
@@ -570,8 +577,8 @@ impl Renderer {
     /// uniform entry (written by [`Renderer::set_model_frame`]); slots of one model
     /// should come together (the entry is rebound when it changes).
     ///
-    /// The ratios and tags go to the GPU as one small instance buffer per pass (8 bytes
-    /// a draw), the draw's instance picking its entry: no per-vertex work, and the
+    /// The ratios, tags and texel details go to the GPU as one small instance buffer per
+    /// pass (12 bytes a draw), the draw's instance picking its entry: no per-vertex work, and the
     /// patches' vertex data never changes after upload.
     #[allow(clippy::too_many_arguments)]
     pub fn encode_models_pass<'a>(
@@ -598,6 +605,7 @@ impl Renderer {
                     0.0
                 },
                 tag: s.tag,
+                texel_lod: if self.texel_blend { s.texel_lod } else { 0.0 },
             });
         }
         if instances.is_empty() {

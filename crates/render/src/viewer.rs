@@ -62,6 +62,9 @@ pub struct ViewerOptions {
     pub shading: Shading,
     /// Geomorphing: on/off, window, arrival blend (see `tessera_stream::MorphOptions`).
     pub morph: MorphOptions,
+    /// Textured models: a patch morphing in from its parent also shows its parent's
+    /// texel detail, sharpening as it morphs ([`Renderer::texel_blend`]; true).
+    pub texel_blend: bool,
 }
 
 impl Default for ViewerOptions {
@@ -80,6 +83,7 @@ impl Default for ViewerOptions {
             background: [0.06, 0.07, 0.09, 1.0],
             shading: Shading::default(),
             morph: s.morph.clone(),
+            texel_blend: true,
         }
     }
 }
@@ -164,6 +168,7 @@ impl Viewer {
         renderer.background = opts.background;
         renderer.set_base_vertex(gpu.base_vertex());
         renderer.has_colors = models[0].index().header().attributes & ATTR_COLORS != 0;
+        renderer.texel_blend = opts.texel_blend;
         renderer.ensure_models(&gpu.device, models.len() as u32);
         let cache = GpuCache::new(&gpu.device, opts.gpu_budget_bytes);
         let scene = models
@@ -217,8 +222,7 @@ impl Viewer {
         // Roots first, each model with the whole budget (they are pinned); then the
         // first split (no demand yet: an even share of what the roots leave).
         for i in 0..v.models.len() {
-            let levels = node_levels(v.models[i].index());
-            v.cache.set_levels(i as u32, levels);
+            v.cache.set_nodes(i as u32, v.models[i].index());
             let textured = v.models[i].index().header().attributes & ATTR_TEXTURE != 0;
             v.cache.set_textured(i as u32, textured);
             let (m, mut store) = v.parts(i);
@@ -357,7 +361,7 @@ impl Viewer {
             let (m, mut store) = self.parts(i);
             if let Some(ix) = m.model.latest_index() {
                 if ix.nodes().len() > m.scheduler.node_count() {
-                    store.cache.set_levels(i as u32, node_levels(&ix));
+                    store.cache.set_nodes(i as u32, &ix);
                     m.scheduler.set_index(&ix, &mut store);
                     m.grown = Some(ix);
                 }
@@ -678,10 +682,6 @@ fn fitted_planes<'a>(
 }
 
 /// The level of every node of `index`, in order (the GPU cache tags vertices with it).
-fn node_levels(index: &ModelIndex) -> Vec<u8> {
-    index.nodes().iter().map(|n| n.level).collect()
-}
-
 /// One model's part of a pass: its number, the nodes drawn and their morph ratios.
 type Draws<'a> = (u32, &'a [u32], &'a [f32]);
 

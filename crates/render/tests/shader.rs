@@ -41,3 +41,45 @@ fn broken_shader_is_caught() {
     };
     assert!(failed);
 }
+
+/// Every entry point translates to GLSL ES 3.00, the browser's WebGL2 (what wgpu's GL
+/// backend does at pipeline creation there), so a construct WebGL2 lacks fails here.
+#[test]
+fn patch_shader_translates_for_webgl2() {
+    let module = naga::front::wgsl::parse_str(tessera_render::PATCH_SHADER).unwrap();
+    let info = naga::valid::Validator::new(
+        naga::valid::ValidationFlags::all(),
+        naga::valid::Capabilities::empty(),
+    )
+    .validate(&module)
+    .unwrap();
+    for ep in &module.entry_points {
+        let options = naga::back::glsl::Options {
+            version: naga::back::glsl::Version::Embedded {
+                version: 300,
+                is_webgl: true,
+            },
+            ..Default::default()
+        };
+        let pipeline = naga::back::glsl::PipelineOptions {
+            shader_stage: ep.stage,
+            entry_point: ep.name.clone(),
+            multiview: None,
+        };
+        let mut out = String::new();
+        let mut w = naga::back::glsl::Writer::new(
+            &mut out,
+            &module,
+            &info,
+            &options,
+            &pipeline,
+            naga::proc::BoundsCheckPolicies::default(),
+        )
+        .unwrap_or_else(|e| panic!("{}: {e:?}", ep.name));
+        w.write().unwrap_or_else(|e| panic!("{}: {e:?}", ep.name));
+        assert!(out.starts_with("#version 300 es"), "{}", ep.name);
+        if ep.name == "fs_textured" {
+            assert!(out.contains("textureGrad"), "{out}");
+        }
+    }
+}

@@ -686,3 +686,70 @@ fn textured_scan_draws_its_texture_within_budget() {
         "the budget was hardly used ({most} bytes)"
     );
 }
+
+/// No texture pop at a switch: a patch drawn at morph ratio 1 (its parent's shape) with
+/// its `texel_lod` shows its parent's texel detail, and at ratio 0 exactly its own.
+/// The child's texture is a fine checker (2-texel squares, 256 x 256, minified here);
+/// its parent's is that texture's mip 2 (64 x 64: the same box filter, so uniform grey),
+/// as the builder's coarser crop of the same source. Without the texel blend the
+/// child at ratio 1 still shows the checker; with it, the parent's grey.
+#[test]
+fn a_patch_morphing_in_shows_its_parents_texel_detail() {
+    let gpu = gpu();
+    let chart = TextureChart {
+        image: 0,
+        scale: [1.0, 1.0],
+        offset: [0.0, 0.0],
+    };
+    let fine = texels(256, 256, |x, y| {
+        let c = if (x / 2 + y / 2) % 2 == 0 { 230 } else { 25 };
+        [c, c, c, 255]
+    });
+    let mips = tessera_render::mip_chain(&fine, 256, 256);
+    let child = textured_quad(|x, y| [x, 1.0 - y], chart, texture(256, 256, fine));
+    let parent = textured_quad(|x, y| [x, 1.0 - y], chart, texture(64, 64, mips[1].clone()));
+    // The texel size of a patch: its model side (1) over its texels.
+    assert!((tessera_render::patch_texel_size(&child, 256, 256, STEP) - 1.0 / 256.0).abs() < 1e-6);
+    assert!((tessera_render::patch_texel_size(&parent, 64, 64, STEP) - 1.0 / 64.0).abs() < 1e-6);
+    let mut cache = GpuCache::new(&gpu.device, 8 << 20);
+    cache
+        .upload(&gpu.device, &gpu.queue, 0, &parent, STEP)
+        .expect("upload");
+    cache
+        .upload(&gpu.device, &gpu.queue, 1, &child, STEP)
+        .expect("upload");
+    let p = cache.slot(0).cloned().unwrap();
+    let c = cache.slot(1).cloned().unwrap();
+    // Without the node table the cache knows no parent: no texel detail to morph from.
+    assert_eq!(c.texel_lod, 0.0);
+    assert!(
+        (c.texel_size - 1.0 / 256.0).abs() < 1e-6,
+        "{}",
+        c.texel_size
+    );
+    let blended = Slot {
+        texel_lod: (p.texel_size / c.texel_size).log2(),
+        ..c.clone()
+    };
+    assert!((blended.texel_lod - 2.0).abs() < 1e-4);
+    let unlit = Shading {
+        unlit: true,
+        ..Default::default()
+    };
+    let image = |s: &Slot, r: f32| draw(&gpu, &cache, &[(s.clone(), r)], unlit, false);
+    let parent_img = image(&p, 0.0);
+    let psnr = |a: &Image, b: &Image| tessera_render::psnr(a, b).unwrap_or(f64::INFINITY);
+    let (with, without) = (image(&blended, 1.0), image(&c, 1.0));
+    let (p_with, p_without) = (psnr(&with, &parent_img), psnr(&without, &parent_img));
+    eprintln!("child at ratio 1 against its parent: {p_with:.2} dB with the texel blend, {p_without:.2} dB without");
+    assert!(
+        p_with >= 40.0,
+        "with the blend the child differs from its parent: {p_with:.2} dB"
+    );
+    assert!(
+        p_without < p_with - 10.0,
+        "the checker should show without the blend: {p_without:.2} dB"
+    );
+    // At its own shape the blend changes nothing.
+    assert_eq!(image(&blended, 0.0).rgba, image(&c, 0.0).rgba);
+}
