@@ -122,9 +122,6 @@ pub struct TextureReport {
     /// Images that could not be read, each once as `name: why`; their vertices are drawn
     /// in their vertex colour.
     pub unreadable_images: Vec<String>,
-    /// Times a source image was decoded again. Always 0 since decoded pyramids are
-    /// spooled to disk (each image is decoded once); kept for the report's readers.
-    pub image_redecodes: u64,
 }
 
 /// Decoded bytes per texel a decode holds at once (estimate for the decode gate): the

@@ -129,7 +129,6 @@ pub fn report_json(r: &BuildReport) -> serde_json::Value {
             "atlases": t.atlases,
             "solid_only": t.solid_only,
             "downsampled_to_fit": t.downsampled_to_fit,
-            "image_redecodes": t.image_redecodes,
             "unreadable_images": t.unreadable_images,
         })),
         "stages": r.stage_seconds.iter().map(|(n, s)| json!({"stage": n, "seconds": s})).collect::<Vec<_>>(),
