@@ -173,11 +173,24 @@ for (const visit of plan.visits) {
   if (visit.cycles && outcome !== 'timeout') {
     try {
       const cdp = await context.newCDPSession(page);
-      const heap = async () => {
-        await cdp.send('HeapProfiler.collectGarbage');
-        await cdp.send('HeapProfiler.collectGarbage');
+      // Collected twice, then counted; while a WebGL context is still live (work the
+      // disposed view started may hold it for a moment: a fetch or a decode job being
+      // answered), collected and counted again, for up to 3 s. A context that is really
+      // leaked stays (the "keep" control).
+      const heap = async (released = true) => {
+        let more;
+        for (let attempt = 0; ; attempt++) {
+          await cdp.send('HeapProfiler.collectGarbage');
+          await cdp.send('HeapProfiler.collectGarbage');
+          more = await countContexts();
+          if (!released || more.contexts_live === 0 || attempt >= 15 || visit.cycles.keep) break;
+          await new Promise((r) => setTimeout(r, 200));
+        }
         const h = await cdp.send('Runtime.getHeapUsage');
-        const more = await page.evaluate(async () => {
+        return { js_heap_used: h.usedSize, js_heap_total: h.totalSize, ...more };
+      };
+      const countContexts = async () => {
+        return page.evaluate(async () => {
           const wasm = await (await import('./tessera_web.js')).default();
           const refs = window.__glContexts;
           const alive = refs.map((r) => r.deref()).filter((c) => c);
@@ -188,7 +201,6 @@ for (const visit of plan.visits) {
             contexts_live: alive.filter((c) => !c.isContextLost()).length,
           };
         });
-        return { js_heap_used: h.usedSize, js_heap_total: h.totalSize, ...more };
       };
       const listeners = async () => {
         const { result } = await cdp.send('Runtime.evaluate', { expression: 'window.__cycleCanvas' });
@@ -222,7 +234,7 @@ for (const visit of plan.visits) {
         );
         const on = await listeners();
         // The heap with the view open (collected), against the same after dispose().
-        const open = visit.cycles.gc === false ? {} : await heap();
+        const open = visit.cycles.gc === false ? {} : await heap(false);
         const rafBefore = await page.evaluate(async () => {
           window.__cycleView.dispose();
           window.__cycleView = null;
