@@ -183,6 +183,7 @@ for (const visit of plan.visits) {
           await cdp.send('HeapProfiler.collectGarbage');
           await cdp.send('HeapProfiler.collectGarbage');
           more = await countContexts();
+          more.gc_rounds = attempt + 1;
           if (!released || more.contexts_live === 0 || attempt >= 15 || visit.cycles.keep) break;
           await new Promise((r) => setTimeout(r, 200));
         }
