@@ -55,7 +55,8 @@ async function compileWasm(url) {
   return WebAssembly.compile(await resp.arrayBuffer());
 }
 
-function loadWasm() {
+/** Compiles and instantiates the wasm module once (for tessera-three.js too). */
+export function loadWasm() {
   if (!wasmReady) {
     wasmReady = (async () => {
       const module = await compileWasm(new URL('./tessera_web_bg.wasm', import.meta.url));
@@ -165,14 +166,20 @@ class DecodePool {
 
 let pool = null;
 
-function acquirePool(size) {
+/**
+ * The page's decode workers (started on first use, `size` of them), or null (no
+ * workers: `size` 0, or none here). Give each back with releasePool: the last one
+ * stops them.
+ */
+export function acquirePool(size) {
   if (size <= 0 || typeof Worker === 'undefined' || !wasmModule) return null;
   if (!pool) pool = new DecodePool(wasmModule, size);
   pool.users++;
   return pool;
 }
 
-function releasePool(p) {
+/** Gives back a pool of acquirePool (null: nothing). */
+export function releasePool(p) {
   if (!p) return;
   p.users--;
   if (p.users <= 0) {

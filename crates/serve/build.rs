@@ -16,6 +16,17 @@ const FILES: [&str; 7] = [
     "package.json",
 ];
 
+/// Embedded too when the build has them: the three.js adapter, its example page and the
+/// three.js files it loads (`scripts/build-web` copies them from web/node_modules).
+const OPTIONAL: [&str; 6] = [
+    "tessera-three.js",
+    "three.html",
+    "three/three.module.js",
+    "three/three.core.js",
+    "three/addons/controls/OrbitControls.js",
+    "three/LICENSE",
+];
+
 fn main() {
     println!("cargo:rerun-if-env-changed=TESSERA_WEB_DIST");
     let manifest = PathBuf::from(std::env::var_os("CARGO_MANIFEST_DIR").unwrap());
@@ -28,7 +39,10 @@ fn main() {
          pub static EMBEDDED_WEB: &[(&str, &[u8])] = &[\n",
     );
     if FILES.iter().all(|f| dist.join(f).is_file()) {
-        for f in FILES {
+        // An optional file added later changes the directory.
+        println!("cargo:rerun-if-changed={}", dist.display());
+        let optional = OPTIONAL.into_iter().filter(|f| dist.join(f).is_file());
+        for f in FILES.into_iter().chain(optional) {
             let p = dist.join(f).canonicalize().unwrap();
             println!("cargo:rerun-if-changed={}", p.display());
             code += &format!(

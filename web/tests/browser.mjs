@@ -41,7 +41,12 @@
 // GET URL/drop (the test's proxy cuts every connection, mid-response, and refuses new
 // ones), wait up to 15 s for the page's notice (window.tesseraNotice), its state and a
 // canvas screenshot to PATH, then GET URL/restore and wait for idle: "dropped" and
-// "restored" states).
+// "restored" states), "three" (with "three": {"model_shot": PATH, "after_shot": PATH
+// (optional)} on web/three.html: the three.js camera as a Tessera camera, the pixel of
+// the page's cube, the model alone screenshot to model_shot (the screenshot is then
+// the whole scene); with "lower_memory": BYTES the model's budget lowered to that and
+// the statistics once patches were evicted ("lowered"); the model's dispose() and
+// renderer.info.memory before and after).
 // Exit 0 when every visit ran (whatever its outcome), 2 on a driver failure.
 
 import { readFileSync, writeFileSync } from 'node:fs';
@@ -480,10 +485,45 @@ for (const visit of plan.visits) {
       consoleLines.push(`driver: shot: ${e.message.split('\n')[0]}`);
     }
   }
-  if (visit.screenshot && outcome === visit.expect && !visit.drop) {
+  // Optional: web/three.html (the three.js adapter), once idle: the camera it drew
+  // (window.tesseraThree.camera(), model coordinates), the page's cube's pixel, the
+  // model alone over the background (the page's objects hidden, two frames drawn) as
+  // a screenshot to "model_shot", then the model's dispose() with renderer.info's
+  // counts before and after.
+  let three = null;
+  if (visit.three && outcome === 'idle') {
+    try {
+      three = await page.evaluate(() => ({ camera: window.tesseraThree.camera(), cube: window.tesseraThree.cubePixel() }));
+      if (visit.screenshot) await page.locator('#view').screenshot({ path: visit.screenshot });
+      await page.evaluate(() => window.tesseraThree.modelOnly(true));
+      await page.evaluate(() => new Promise((r) => requestAnimationFrame(() => requestAnimationFrame(r))));
+      await page.locator('#view').screenshot({ path: visit.three.model_shot });
+      await page.evaluate(() => window.tesseraThree.modelOnly(false));
+      if (visit.three.lower_memory) {
+        // A lower budget: patches evicted, their meshes disposed.
+        await page.evaluate((b) => window.tesseraThree.model.setMemoryBytes(b), visit.three.lower_memory);
+        await page.waitForFunction(
+          () => {
+            const s = window.tesseraStats;
+            return s.evicted > 0 && s.resident_bytes <= s.budget_bytes && s.meshes === s.resident_nodes;
+          },
+          null,
+          { timeout: 30000, polling: 50 },
+        );
+        three.lowered = await page.evaluate(() => window.tesseraStats);
+      }
+      three.dispose = await page.evaluate(() => window.tesseraThree.dispose());
+      await page.evaluate(() => new Promise((r) => requestAnimationFrame(() => requestAnimationFrame(r))));
+      if (visit.three.after_shot) await page.locator('#view').screenshot({ path: visit.three.after_shot });
+      three.after_frames = await page.evaluate(() => ({ ...window.tesseraThree.renderer.info.memory }));
+    } catch (e) {
+      consoleLines.push(`driver: three: ${e.message.split('\n')[0]}`);
+    }
+  }
+  if (visit.screenshot && outcome === visit.expect && !visit.drop && !visit.three) {
     await page.locator('#view').screenshot({ path: visit.screenshot });
   }
-  results.push({ name: visit.name, outcome, ms, ...state, interaction, shot, touch, pick, measure, cycles, drop, console: consoleLines });
+  results.push({ name: visit.name, outcome, ms, ...state, interaction, shot, touch, pick, measure, cycles, drop, three, console: consoleLines });
   await context.close();
 }
 await browser.close();

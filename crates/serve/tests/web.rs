@@ -194,6 +194,14 @@ fn the_embedded_viewer_is_the_built_one() {
             ("tessera_worker.js", "text/javascript; charset=utf-8"),
             ("tessera_web.js", "text/javascript; charset=utf-8"),
             ("tessera_web_bg.wasm", "application/wasm"),
+            // The three.js adapter, its page and three.js (a nested path).
+            ("tessera-three.js", "text/javascript; charset=utf-8"),
+            ("three.html", "text/html; charset=utf-8"),
+            ("three/three.module.js", "text/javascript; charset=utf-8"),
+            (
+                "three/addons/controls/OrbitControls.js",
+                "text/javascript; charset=utf-8",
+            ),
         ] {
             let (s, ct, body) = get(&format!("{base}/{name}"));
             assert_eq!((s, ct.as_deref()), (200, Some(ty)), "{name}");

@@ -12,6 +12,10 @@
 //!   errors worded for the page (404, no range support, CORS, model changed).
 //! - `viewer` (wasm32): `Viewer`, the wasm-bindgen class: open (device, first 64 KiB,
 //!   top of the index, roots), `frame` (navigation, scheduler, draw), input, camera.
+//! - `stream` (wasm32): `Stream`, the wasm-bindgen class under the three.js adapter
+//!   (`web/tessera-three.js`): the same open, fetching, decode workers and scheduler
+//!   as the viewer, no device; resident patches kept as arrays for three.js meshes,
+//!   what was added and evicted, and the draw list, each frame.
 //! - `pick` (wasm32): the depth under a pixel of the last frame read back on WebGL2
 //!   (a one-pixel pass packing the depth's bits into RGBA8), for zoom to the cursor,
 //!   double-click recentre and pinch about the fingers.
@@ -43,10 +47,14 @@ mod http;
 #[cfg(target_arch = "wasm32")]
 mod pick;
 #[cfg(target_arch = "wasm32")]
+mod stream;
+#[cfg(target_arch = "wasm32")]
 mod viewer;
 #[cfg(target_arch = "wasm32")]
 mod worker;
 
+#[cfg(target_arch = "wasm32")]
+pub use stream::Stream;
 #[cfg(target_arch = "wasm32")]
 pub use viewer::Viewer;
 

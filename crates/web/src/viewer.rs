@@ -97,27 +97,27 @@ async fn read_with<T>(
 /// The patch source: range requests through [`Fetcher`] (coalesced, at most 3 in
 /// flight), decoded by the page's decode workers ([`Viewer::set_decoder`]), or between
 /// frames on this thread without them.
-struct Remote {
-    http: Rc<Http>,
-    fetcher: Rc<RefCell<Fetcher>>,
+pub(crate) struct Remote {
+    pub http: Rc<Http>,
+    pub fetcher: Rc<RefCell<Fetcher>>,
     /// An error that stops streaming (the model changed on the server).
-    fatal: Rc<RefCell<Option<String>>>,
-    closed: Rc<Cell<bool>>,
+    pub fatal: Rc<RefCell<Option<String>>>,
+    pub closed: Rc<Cell<bool>>,
     /// The roots, fetched and decoded while opening (answered by `read_now`).
     roots: Vec<Answer>,
     /// The page's decode workers, if any.
-    decoder: Option<Rc<Decoders>>,
+    pub decoder: Option<Rc<Decoders>>,
     /// Whether they failed (then decoding falls back to this thread, for good).
-    workers_failed: Rc<Cell<bool>>,
+    pub workers_failed: Rc<Cell<bool>>,
     /// Make textures' mips in the workers (a textured model).
     mips: bool,
 }
 
 /// The page's decode function (a job's bytes in, a promise of the reply's bytes:
 /// `crate::wire`) and how many workers run it.
-struct Decoders {
+pub(crate) struct Decoders {
     decode: js_sys::Function,
-    workers: usize,
+    pub workers: usize,
 }
 
 /// What handing jobs to the workers needs, cloned into each callback.
@@ -131,6 +131,51 @@ struct Dispatch {
 }
 
 impl Remote {
+    /// The source of an opened model (`roots`: [`Opened::roots`]); `mips`: make the
+    /// textures' mip chains in the decode workers.
+    pub fn new(http: Rc<Http>, index: &Arc<ModelIndex>, roots: Vec<Answer>, mips: bool) -> Remote {
+        Remote {
+            http,
+            fetcher: Rc::new(RefCell::new(Fetcher::new(index.clone()))),
+            fatal: Rc::new(RefCell::new(None)),
+            closed: Rc::new(Cell::new(false)),
+            roots,
+            decoder: None,
+            workers_failed: Rc::new(Cell::new(false)),
+            mips,
+        }
+    }
+
+    /// Decodes fetched patches with `decode` from now on ([`Viewer::set_decoder`]).
+    pub fn set_decoder(&mut self, decode: js_sys::Function, workers: u32) {
+        self.decoder = (workers > 0).then(|| {
+            Rc::new(Decoders {
+                decode,
+                workers: workers as usize,
+            })
+        });
+    }
+
+    /// Whether the fetches and decodes asked for have all settled (nothing pending,
+    /// nothing missing but what does not exist) after a frame with `stats`: the
+    /// streaming half of a converged view.
+    pub fn settled(&self, stats: &FrameStats, scheduler: &Scheduler) -> bool {
+        let fetch = self.fetcher.borrow();
+        // Nodes whose bytes do not exist (a truncated file) stay missing: their parents
+        // are the view's final state, as long as nothing else failed (a network outage
+        // retried with backoff is not converged).
+        let gone = fetch.gone();
+        let misses_settled = stats.cache_misses == 0
+            || (stats.cache_misses <= gone.len()
+                && scheduler.failed().iter().all(|n| gone.contains(n)));
+        stats.pending_loads == 0
+            && misses_settled
+            && stats.index_wants == 0
+            && stats.morph_blending == 0
+            && fetch.pending() == 0
+            && fetch.undecoded() == 0
+    }
+
     /// Sends what the fetcher wants sent; each answer sends more.
     fn pump(&self) {
         pump(
@@ -335,6 +380,27 @@ struct TimedStore<'a> {
     times: &'a mut UploadTimes,
 }
 
+impl<'a> TimedStore<'a> {
+    /// Model 0's store in `cache`, its uploads timed into `times`.
+    fn of(
+        cache: &'a mut GpuCache,
+        gpu: &'a Gpu,
+        quant_step: f64,
+        times: &'a mut UploadTimes,
+    ) -> TimedStore<'a> {
+        TimedStore {
+            inner: GpuStore {
+                cache,
+                device: &gpu.device,
+                queue: &gpu.queue,
+                quant_step,
+                model: 0,
+            },
+            times,
+        }
+    }
+}
+
 impl ResidentStore for TimedStore<'_> {
     fn bytes_for(&self, patch: &PatchData) -> u64 {
         self.inner.bytes_for(patch)
@@ -420,15 +486,8 @@ pub struct Viewer {
     renderer: Renderer,
     cache: GpuCache,
     depth: wgpu::TextureView,
-    scheduler: Scheduler,
-    source: Remote,
-    index: Arc<ModelIndex>,
-    sparse: Rc<RefCell<SparseBytes>>,
-    /// A grown index (or why growing failed), taken by the next frame.
-    grown: Rc<RefCell<Option<Result<ModelIndex, String>>>>,
-    growing: Rc<Cell<bool>>,
-    /// No growth before this time (after a failure), milliseconds.
-    grow_after_ms: f64,
+    /// The model streamed (what the three.js adapter's `Stream` shares).
+    m: Streamed,
     nav: Navigator,
     quant_step: f64,
     has_colors: bool,
@@ -436,18 +495,10 @@ pub struct Viewer {
     textured: bool,
     uploads: UploadTimes,
     last_ms: Option<f64>,
-    stats: FrameStats,
     converged: bool,
     dirty: bool,
     drag: Option<i16>,
     pointer: (f64, f64),
-    opened_ms: f64,
-    /// Milliseconds from `open` to the first frame drawn (the roots) and to the first
-    /// converged frame.
-    first_frame_ms: Option<f64>,
-    converged_ms: Option<f64>,
-    index_bytes: u64,
-    frames: u64,
     /// Depth picks: the reader, the requests waiting for it, the one in flight (with
     /// the camera and planes of the frame it reads), answers for the page.
     picker: DepthPicker,
@@ -457,15 +508,6 @@ pub struct Viewer {
     pinch: Option<Pinch>,
     /// The camera and near/far planes of the frame the depth texture holds.
     drawn: Option<(Camera, (f64, f64))>,
-    /// Why part of the model cannot be shown (a truncated file), for the page.
-    warning: Option<String>,
-}
-
-impl Drop for Viewer {
-    fn drop(&mut self) {
-        // Requests in flight finish into nothing; no new ones start.
-        self.source.closed.set(true);
-    }
 }
 
 fn depth_view(device: &wgpu::Device, w: u32, h: u32) -> wgpu::TextureView {
@@ -492,6 +534,406 @@ fn parse_camera(json: &str) -> Result<Camera, JsError> {
     Camera::from_json_str(json).map_err(|e| err(format!("camera: {e}")))
 }
 
+/// A grown index (or why growing failed), taken by the next frame.
+pub(crate) type Grown = Rc<RefCell<Option<Result<ModelIndex, String>>>>;
+
+/// Reads more of `base`, the paged index read so far, off the frame: pages doubled
+/// until another level shows (a page may end inside a level, which stays hidden until it
+/// is whole), as `tessera-http` does; the result lands in `grown`, `growing` is true
+/// meanwhile.
+pub(crate) fn grow_index(
+    source: &Remote,
+    sparse: &Rc<RefCell<SparseBytes>>,
+    base: &Arc<ModelIndex>,
+    grown: &Grown,
+    growing: &Rc<Cell<bool>>,
+) {
+    growing.set(true);
+    let (http, sparse, grown, growing) = (
+        source.http.clone(),
+        sparse.clone(),
+        grown.clone(),
+        growing.clone(),
+    );
+    let base = base.clone();
+    let closed = source.closed.clone();
+    spawn_local(async move {
+        let shown = base.nodes().len();
+        let mut cur = (*base).clone();
+        let r = loop {
+            let pages = (2 * cur.loaded_pages()).max(1);
+            match read_with(&http, &sparse, |s| cur.grown(s, pages)).await {
+                Ok(next) if next.nodes().len() > shown || next.is_complete() => break Ok(next),
+                Ok(next) => cur = next,
+                Err(e) => break Err(e),
+            }
+        };
+        if !closed.get() {
+            *grown.borrow_mut() = Some(r);
+        }
+        growing.set(false);
+    });
+}
+
+/// A model being streamed: what the canvas [`Viewer`] and the three.js adapter's
+/// `Stream` share around their own stores: the scheduler, the patch source, the index
+/// read so far (grown off the frame as the view asks) and the figures of the frames.
+pub(crate) struct Streamed {
+    pub scheduler: Scheduler,
+    pub source: Remote,
+    pub index: Arc<ModelIndex>,
+    pub stats: FrameStats,
+    sparse: Rc<RefCell<SparseBytes>>,
+    /// A grown index (or why growing failed), taken by the next frame.
+    grown: Grown,
+    growing: Rc<Cell<bool>>,
+    /// No growth before this time (after a failure), milliseconds.
+    grow_after_ms: f64,
+    opened_ms: f64,
+    /// Milliseconds from `open` to the first frame drawn (the roots) and to the first
+    /// converged frame.
+    first_frame_ms: Option<f64>,
+    converged_ms: Option<f64>,
+    index_bytes: u64,
+    frames: u64,
+    /// Why part of the model cannot be shown (a truncated file), for the page.
+    warning: Option<String>,
+}
+
+impl Drop for Streamed {
+    fn drop(&mut self) {
+        // Requests in flight finish into nothing; no new ones start.
+        self.source.closed.set(true);
+    }
+}
+
+impl Streamed {
+    pub fn new(
+        index: Arc<ModelIndex>,
+        scheduler: Scheduler,
+        source: Remote,
+        rest: OpenedRest,
+        opened_ms: f64,
+    ) -> Streamed {
+        Streamed {
+            index,
+            scheduler,
+            source,
+            stats: FrameStats::default(),
+            sparse: rest.sparse,
+            grown: Rc::new(RefCell::new(None)),
+            growing: Rc::new(Cell::new(false)),
+            grow_after_ms: 0.0,
+            opened_ms,
+            first_frame_ms: None,
+            converged_ms: None,
+            index_bytes: rest.index_bytes,
+            frames: 0,
+            warning: rest.warning,
+        }
+    }
+
+    /// An index grown since the last frame, showing more nodes (the caller readies its
+    /// store for it, then [`Streamed::set_index`]); a failure is reported and retried
+    /// 2 s after `time_ms`.
+    pub fn take_grown(&mut self, time_ms: f64) -> Option<Arc<ModelIndex>> {
+        let grown = self.grown.borrow_mut().take();
+        match grown {
+            Some(Ok(ix)) if ix.nodes().len() > self.index.nodes().len() => Some(Arc::new(ix)),
+            Some(Err(e)) => {
+                web_sys::console::warn_1(
+                    &format!("tessera: reading more of the index: {e}").into(),
+                );
+                self.grow_after_ms = time_ms + 2000.0;
+                None
+            }
+            _ => None,
+        }
+    }
+
+    /// Selects over `ix` from now on (what is resident stays).
+    pub fn set_index(&mut self, ix: Arc<ModelIndex>, store: &mut impl ResidentStore) {
+        self.scheduler.set_index(&ix, store);
+        self.source.fetcher.borrow_mut().set_index(ix.clone());
+        self.index = ix;
+    }
+
+    /// The scheduler's frame of `camera` at `time_ms` over `store`; more of the index
+    /// read when the view wants detail it does not show yet.
+    pub fn frame(&mut self, camera: &Camera, time_ms: f64, store: &mut impl ResidentStore) {
+        self.stats = self
+            .scheduler
+            .frame(camera, time_ms / 1e3, &mut self.source, store);
+        if self.stats.index_wants > 0
+            && !self.growing.get()
+            && !self.index.is_complete()
+            && time_ms >= self.grow_after_ms
+        {
+            grow_index(
+                &self.source,
+                &self.sparse,
+                &self.index,
+                &self.grown,
+                &self.growing,
+            );
+        }
+    }
+
+    /// Counts a frame shown (after [`Streamed::frame`] and its draw).
+    pub fn framed(&mut self) {
+        self.frames += 1;
+        if self.first_frame_ms.is_none() && self.stats.selected_nodes > 0 {
+            self.first_frame_ms = Some(now_ms() - self.opened_ms);
+        }
+    }
+
+    /// Whether streaming has settled: nothing pending or growing, a frame shown.
+    pub fn settled(&self) -> bool {
+        self.source.settled(&self.stats, &self.scheduler)
+            && !self.growing.get()
+            && self.first_frame_ms.is_some()
+    }
+
+    /// Records whether the view converged this frame (the first time: when).
+    pub fn converged(&mut self, converged: bool) {
+        if converged && self.converged_ms.is_none() {
+            self.converged_ms = Some(now_ms() - self.opened_ms);
+        }
+    }
+
+    /// The statistics both front ends report (see `web/tessera.js`); `idle`: the view
+    /// converged.
+    pub fn stats_json(&self, idle: bool) -> Value {
+        let fetch = self.source.fetcher.borrow();
+        let f = fetch.stats();
+        let main_decoded = f.decoded - f.worker_decoded;
+        let s = &self.stats;
+        json!({
+            "idle": idle,
+            "frame": self.frames,
+            "nodes": s.selected_nodes,
+            "triangles": s.triangles,
+            "max_level": s.max_level,
+            "pending": s.pending_loads,
+            "in_flight": fetch.in_flight(),
+            "undecoded": fetch.undecoded(),
+            "bytes_received": self.source.http.bytes.get(),
+            "index_bytes": self.index_bytes,
+            "requests": self.source.http.requests.get(),
+            "failed_requests": f.failed_requests,
+            "failed_patches": s.failed_patches,
+            "index_nodes": self.index.nodes().len(),
+            "model_nodes": self.index.header().node_count,
+            "ram_bytes": s.ram_resident_bytes,
+            "selection_ms": s.selection_ms,
+            // Patches decoded: all, and by the decode workers (their time is off the
+            // main thread, mips included); the decode_ms_* figures are this thread's
+            // (roots, and every patch without workers).
+            "decoded": f.decoded,
+            "worker_decoded": f.worker_decoded,
+            "worker_decode_ms_mean": if f.worker_decoded > 0 { f.worker_ms / f.worker_decoded as f64 } else { 0.0 },
+            "at_workers": fetch.at_workers(),
+            // Main-thread time taking the workers' replies in (copies).
+            "reply_ms_mean": if f.worker_decoded > 0 { f.reply_ms / f.worker_decoded as f64 } else { 0.0 },
+            "reply_ms_max": f.reply_max_ms,
+            "decode_workers": self.source.decoder.as_ref().map_or(0, |d| d.workers),
+            "workers_failed": self.source.workers_failed.get(),
+            "decode_ms_mean": if main_decoded > 0 { f.decode_ms / main_decoded as f64 } else { 0.0 },
+            "decode_ms_max": f.decode_max_ms,
+            "decode_ms_total": f.decode_ms,
+            "first_frame_ms": self.first_frame_ms,
+            "converged_ms": self.converged_ms,
+            // A problem that does not stop the view (a truncated file), or null.
+            "warning": self.warning,
+        })
+    }
+}
+
+/// A model opened over HTTP: what [`open_model`] read.
+pub(crate) struct Opened {
+    pub http: Rc<Http>,
+    pub sparse: Rc<RefCell<SparseBytes>>,
+    pub index: ModelIndex,
+    /// The roots, fetched and decoded (answered by [`Remote`]'s `read_now`).
+    pub roots: Vec<Answer>,
+    /// The roots' vertices in model coordinates (or the bounding sphere's box), which
+    /// frame the home view.
+    pub points: Vec<DVec3>,
+    /// Why part of the model cannot be shown (a truncated file), for the page.
+    pub warning: Option<String>,
+    /// Bytes fetched to read the header and the top of the index.
+    pub index_bytes: u64,
+}
+
+/// What [`Streamed::new`] keeps of an [`Opened`].
+pub(crate) struct OpenedRest {
+    sparse: Rc<RefCell<SparseBytes>>,
+    warning: Option<String>,
+    index_bytes: u64,
+}
+
+impl Opened {
+    /// The connection, the index, the roots, and the rest for [`Streamed::new`].
+    pub fn split(self) -> (Rc<Http>, ModelIndex, Vec<Answer>, OpenedRest) {
+        let rest = OpenedRest {
+            sparse: self.sparse,
+            warning: self.warning,
+            index_bytes: self.index_bytes,
+        };
+        (self.http, self.index, self.roots, rest)
+    }
+}
+
+/// Opens the model at `url` (what [`Viewer::open`] and [`crate::stream::Stream::open`]
+/// share): its first `prefix_bytes`, the top of its index, its roots. A file shorter
+/// than its header says is opened at the header's length (the warning says so).
+pub(crate) async fn open_model(url: &str, prefix_bytes: u64) -> Result<Opened, JsError> {
+    // The model: its first 64 KiB, the top of its index, its roots.
+    let http = Rc::new(Http::new(url));
+    let prefix = http
+        .open(prefix_bytes)
+        .await
+        .map_err(|e| err(e.message()))?;
+    // A file shorter than its header says (a partial upload or copy): opened at the
+    // length the header names, so the index and the patches that exist are read and
+    // shown; what lies past the end is reported, its nodes' parents drawn instead.
+    let served = http.len();
+    let (length, warning) = match ModelIndex::parse_header(&prefix, served) {
+        Err(e @ tessera_format::FormatError::Truncated { expected_bytes, .. })
+            if prefix.len() as u64 >= tessera_format::HEADER_BYTES && expected_bytes > served =>
+        {
+            (
+                expected_bytes,
+                Some(format!(
+                    "{url}: {e}: the patches stored past byte {served} are missing \
+                         (coarser levels are shown in their place)"
+                )),
+            )
+        }
+        _ => (served, None),
+    };
+    let sparse = Rc::new(RefCell::new(SparseBytes::new(length)));
+    sparse.borrow_mut().insert(0, prefix);
+    let cannot = |m: String| err(format!("cannot open {url}: {m}"));
+    let index = read_with(&http, &sparse, |s| ModelIndex::read_top(s, TOP_PAGES))
+        .await
+        .map_err(cannot)?;
+    let index_bytes = http.bytes.get();
+    let root_count = (index.header().root_count as usize).min(index.nodes().len());
+    let roots_range = match root_count {
+        0 => return Err(cannot("the model has no roots".into())),
+        n => {
+            let a = index.patch_range(0).map_err(|e| cannot(e.to_string()))?;
+            let b = index
+                .patch_range(n - 1)
+                .map_err(|e| cannot(e.to_string()))?;
+            a.start..b.end
+        }
+    };
+    let body = read_with(&http, &sparse, |s| {
+        use tessera_format::ByteSource;
+        s.read(roots_range.clone()).map(|b| b.into_owned())
+    })
+    .await
+    .map_err(cannot)?;
+    let grid = Grid::of_header(index.header());
+    let mut points = Vec::new();
+    let mut roots = Vec::new();
+    for n in 0..root_count {
+        let r = index.patch_range(n).map_err(|e| cannot(e.to_string()))?;
+        let at = (r.start - roots_range.start) as usize..(r.end - roots_range.start) as usize;
+        let p = index.decode_patch(n, &body[at]);
+        if let Ok(p) = &p {
+            points.extend(p.positions.iter().map(|&q| DVec3::from(grid.position(q))));
+        }
+        roots.push(Answer::from_result(n as u32, p));
+    }
+    if points.is_empty() {
+        let b = index.header().bounding_sphere;
+        let c = DVec3::new(b[0], b[1], b[2]);
+        points = vec![c - DVec3::splat(b[3]), c + DVec3::splat(b[3])];
+    }
+
+    Ok(Opened {
+        http,
+        sparse,
+        index,
+        roots,
+        points,
+        warning,
+        index_bytes,
+    })
+}
+
+/// The options `Viewer::open` and `Stream::open` share (their JSON `options`).
+pub(crate) struct StreamOptions {
+    /// `tolerancePx` (default 1).
+    pub tolerance_px: f32,
+    /// `memoryBytes` (default 512 MiB): half for the resident patches, a quarter for
+    /// decoded patches waiting ([`new_scheduler`]).
+    pub memory: u64,
+    /// `prefixBytes` (default [`PREFIX_BYTES`]).
+    pub prefix_bytes: u64,
+    /// `maxTextureDim` (default none).
+    pub max_texture_dim: Option<u32>,
+}
+
+impl StreamOptions {
+    /// The shared options of `options` (JSON), and the whole object for the others.
+    pub fn parse(options: &str) -> Result<(StreamOptions, Value), JsError> {
+        let opts: Value =
+            serde_json::from_str(options).map_err(|e| err(format!("options: {e}")))?;
+        let o = StreamOptions {
+            tolerance_px: opts["tolerancePx"].as_f64().unwrap_or(1.0) as f32,
+            memory: opts["memoryBytes"].as_f64().unwrap_or(512.0 * 1048576.0) as u64,
+            prefix_bytes: opts["prefixBytes"]
+                .as_f64()
+                .map_or(PREFIX_BYTES, |b| (b as u64).max(1)),
+            max_texture_dim: opts["maxTextureDim"]
+                .as_f64()
+                .filter(|d| d.is_finite() && *d >= 1.0)
+                .map(|d| d as u32),
+        };
+        Ok((o, opts))
+    }
+}
+
+/// The scheduler of an opened model: `memory` bytes, half for the store, a quarter for
+/// decoded patches in RAM (as `tessera render --memory`).
+pub(crate) fn new_scheduler(index: &ModelIndex, tolerance_px: f32, memory: u64) -> Scheduler {
+    Scheduler::new(
+        index,
+        SchedulerOptions {
+            tolerance_px,
+            store_budget_bytes: memory / 2,
+            ram_budget_bytes: memory / 4,
+            clock: now_ms,
+            ..SchedulerOptions::default()
+        },
+    )
+}
+
+/// The box of `points` (min, max).
+pub(crate) fn points_box(points: &[DVec3]) -> (DVec3, DVec3) {
+    points.iter().fold(
+        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+        |(lo, hi), &p| (lo.min(p), hi.max(p)),
+    )
+}
+
+/// The desktop's navigation over the roots' extent: the home view framed by `points`,
+/// up guessed from their box.
+pub(crate) fn home_navigator(points: &[DVec3], quant_step: f64, w: u32, h: u32) -> Navigator {
+    let (min, max) = points_box(points);
+    let up = tessera_nav::guess_up(min.to_array(), max.to_array());
+    let mut nav = Navigator::new(Aabb::new(min, max), up, w, h);
+    let stride = points.len().div_ceil(HOME_POINTS).max(1);
+    let home: Vec<DVec3> = points.iter().step_by(stride).copied().collect();
+    nav.home_points(&home);
+    nav.set_min_distance(quant_step * 4.0);
+    nav
+}
+
 #[wasm_bindgen]
 impl Viewer {
     /// Opens the model at `url` in `canvas` (its current pixel size). `options` is a
@@ -509,21 +951,19 @@ impl Viewer {
         options: String,
     ) -> Result<Viewer, JsError> {
         let opened_ms = now_ms();
-        let opts: Value =
-            serde_json::from_str(&options).map_err(|e| err(format!("options: {e}")))?;
-        let tolerance_px = opts["tolerancePx"].as_f64().unwrap_or(1.0) as f32;
-        let memory = opts["memoryBytes"].as_f64().unwrap_or(512.0 * 1048576.0) as u64;
-        let prefix_bytes = opts["prefixBytes"]
-            .as_f64()
-            .map_or(PREFIX_BYTES, |b| (b as u64).max(1));
+        let (
+            StreamOptions {
+                tolerance_px,
+                memory,
+                prefix_bytes,
+                max_texture_dim,
+            },
+            opts,
+        ) = StreamOptions::parse(&options)?;
         let camera = match &opts["camera"] {
             Value::Null => None,
             v => Some(Camera::from_json_value(v).map_err(|e| err(format!("camera: {e}")))?),
         };
-        let max_texture_dim = opts["maxTextureDim"]
-            .as_f64()
-            .filter(|d| d.is_finite() && *d >= 1.0)
-            .map(|d| d as u32);
         let (w, h) = (canvas.width().max(1), canvas.height().max(1));
 
         // The device: WebGL2 (see ARCHITECTURE.md for why not WebGPU).
@@ -574,85 +1014,10 @@ impl Viewer {
         };
         surface.configure(&gpu.device, &config);
 
-        // The model: its first 64 KiB, the top of its index, its roots.
-        let http = Rc::new(Http::new(&url));
-        let prefix = http
-            .open(prefix_bytes)
-            .await
-            .map_err(|e| err(e.message()))?;
-        // A file shorter than its header says (a partial upload or copy): opened at the
-        // length the header names, so the index and the patches that exist are read and
-        // shown; what lies past the end is reported, its nodes' parents drawn instead.
-        let served = http.len();
-        let (length, warning) = match ModelIndex::parse_header(&prefix, served) {
-            Err(e @ tessera_format::FormatError::Truncated { expected_bytes, .. })
-                if prefix.len() as u64 >= tessera_format::HEADER_BYTES
-                    && expected_bytes > served =>
-            {
-                (
-                    expected_bytes,
-                    Some(format!(
-                        "{url}: {e}: the patches stored past byte {served} are missing \
-                         (coarser levels are shown in their place)"
-                    )),
-                )
-            }
-            _ => (served, None),
-        };
-        let sparse = Rc::new(RefCell::new(SparseBytes::new(length)));
-        sparse.borrow_mut().insert(0, prefix);
-        let cannot = |m: String| err(format!("cannot open {url}: {m}"));
-        let index = read_with(&http, &sparse, |s| ModelIndex::read_top(s, TOP_PAGES))
-            .await
-            .map_err(cannot)?;
-        let index_bytes = http.bytes.get();
-        let root_count = (index.header().root_count as usize).min(index.nodes().len());
-        let roots_range = match root_count {
-            0 => return Err(cannot("the model has no roots".into())),
-            n => {
-                let a = index.patch_range(0).map_err(|e| cannot(e.to_string()))?;
-                let b = index
-                    .patch_range(n - 1)
-                    .map_err(|e| cannot(e.to_string()))?;
-                a.start..b.end
-            }
-        };
-        let body = read_with(&http, &sparse, |s| {
-            use tessera_format::ByteSource;
-            s.read(roots_range.clone()).map(|b| b.into_owned())
-        })
-        .await
-        .map_err(cannot)?;
-        let grid = Grid::of_header(index.header());
-        let mut points = Vec::new();
-        let mut roots = Vec::new();
-        for n in 0..root_count {
-            let r = index.patch_range(n).map_err(|e| cannot(e.to_string()))?;
-            let at = (r.start - roots_range.start) as usize..(r.end - roots_range.start) as usize;
-            let p = index.decode_patch(n, &body[at]);
-            if let Ok(p) = &p {
-                points.extend(p.positions.iter().map(|&q| DVec3::from(grid.position(q))));
-            }
-            roots.push(Answer::from_result(n as u32, p));
-        }
-        if points.is_empty() {
-            let b = index.header().bounding_sphere;
-            let c = DVec3::new(b[0], b[1], b[2]);
-            points = vec![c - DVec3::splat(b[3]), c + DVec3::splat(b[3])];
-        }
-
-        // Navigation as on the desktop: the home view framed by the roots' extent,
-        // up guessed from it.
-        let (min, max) = points.iter().fold(
-            (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
-            |(lo, hi), &p| (lo.min(p), hi.max(p)),
-        );
-        let up = tessera_nav::guess_up(min.to_array(), max.to_array());
-        let mut nav = Navigator::new(Aabb::new(min, max), up, w, h);
-        let stride = points.len().div_ceil(HOME_POINTS).max(1);
-        let home: Vec<DVec3> = points.iter().step_by(stride).copied().collect();
-        nav.home_points(&home);
-        nav.set_min_distance(grid.step() * 4.0);
+        let opened = open_model(&url, prefix_bytes).await?;
+        let grid = Grid::of_header(opened.index.header());
+        let mut nav = home_navigator(&opened.points, grid.step(), w, h);
+        let (http, index, roots, opened_rest) = opened.split();
         if let Some(cam) = &camera {
             nav.set_camera(cam)
                 .map_err(|e| err(format!("camera: {e}")))?;
@@ -665,47 +1030,22 @@ impl Viewer {
         let has_colors = index.header().attributes & ATTR_COLORS != 0;
         renderer.has_colors = has_colors;
         let mut cache = GpuCache::new(&gpu.device, memory / 2);
-        cache.set_levels(0, index.nodes().iter().map(|n| n.level).collect());
+        // Levels for the vertex tags; parents and their errors for the texel detail a
+        // textured patch morphs from (as the desktop).
+        cache.set_nodes(0, &index);
         // Textured models (format version 3, a texture per patch): uploaded with their
         // textures (mips made at upload, from the first level that fits the device's
         // largest texture) and drawn through the textured pipeline, as the desktop.
         let textured = index.header().attributes & ATTR_TEXTURE != 0;
         cache.set_textured(0, textured);
-        let mut scheduler = Scheduler::new(
-            &index,
-            SchedulerOptions {
-                tolerance_px,
-                store_budget_bytes: memory / 2,
-                ram_budget_bytes: memory / 4,
-                clock: now_ms,
-                ..SchedulerOptions::default()
-            },
-        );
-        let mut source = Remote {
-            http,
-            fetcher: Rc::new(RefCell::new(Fetcher::new(index.clone()))),
-            fatal: Rc::new(RefCell::new(None)),
-            closed: Rc::new(Cell::new(false)),
-            roots,
-            decoder: None,
-            workers_failed: Rc::new(Cell::new(false)),
-            mips: textured,
-        };
+        let mut scheduler = new_scheduler(&index, tolerance_px, memory);
+        let mut source = Remote::new(http, &index, roots, textured);
         let quant_step = grid.step();
         let mut uploads = UploadTimes::default();
-        {
-            let mut store = TimedStore {
-                inner: GpuStore {
-                    cache: &mut cache,
-                    device: &gpu.device,
-                    queue: &gpu.queue,
-                    quant_step,
-                    model: 0,
-                },
-                times: &mut uploads,
-            };
-            scheduler.load_roots(&mut source, &mut store);
-        }
+        scheduler.load_roots(
+            &mut source,
+            &mut TimedStore::of(&mut cache, &gpu, quant_step, &mut uploads),
+        );
         let depth = depth_view(&gpu.device, w, h);
         let picker = DepthPicker::new(&gpu.device);
         Ok(Viewer {
@@ -715,36 +1055,23 @@ impl Viewer {
             renderer,
             cache,
             depth,
-            scheduler,
-            source,
-            index,
-            sparse,
-            grown: Rc::new(RefCell::new(None)),
-            growing: Rc::new(Cell::new(false)),
-            grow_after_ms: 0.0,
+            m: Streamed::new(index, scheduler, source, opened_rest, opened_ms),
             nav,
             quant_step,
             has_colors,
             textured,
             uploads,
             last_ms: None,
-            stats: FrameStats::default(),
             converged: false,
             dirty: true,
             drag: None,
             pointer: (0.0, 0.0),
-            opened_ms,
-            first_frame_ms: None,
-            converged_ms: None,
-            index_bytes,
-            frames: 0,
             picker,
             picks: VecDeque::new(),
             pick_in_flight: None,
             answers: Vec::new(),
             pinch: None,
             drawn: None,
-            warning,
         })
     }
 
@@ -753,7 +1080,7 @@ impl Viewer {
     /// Returns the statistics as JSON (see `web/tessera.js`); a fatal streaming error
     /// comes back as an exception.
     pub fn frame(&mut self, time_ms: f64) -> Result<String, JsError> {
-        if let Some(m) = self.source.fatal.borrow().as_ref() {
+        if let Some(m) = self.m.source.fatal.borrow().as_ref() {
             return Err(err(m));
         }
         let dt = self.last_ms.map_or(0.0, |t| ((time_ms - t) / 1e3).max(0.0));
@@ -764,129 +1091,63 @@ impl Viewer {
         let moving = self.nav.needs_update() || self.drag.is_some();
         self.nav.update(dt);
         // A paged index read further: select over more of it.
-        let grown = self.grown.borrow_mut().take();
-        match grown {
-            Some(Ok(ix)) if ix.nodes().len() > self.index.nodes().len() => {
-                let ix = Arc::new(ix);
-                self.cache
-                    .set_levels(0, ix.nodes().iter().map(|n| n.level).collect());
-                let mut store = TimedStore {
-                    inner: GpuStore {
-                        cache: &mut self.cache,
-                        device: &self.gpu.device,
-                        queue: &self.gpu.queue,
-                        quant_step: self.quant_step,
-                        model: 0,
-                    },
-                    times: &mut self.uploads,
-                };
-                self.scheduler.set_index(&ix, &mut store);
-                self.source.fetcher.borrow_mut().set_index(ix.clone());
-                self.index = ix;
-                self.dirty = true;
-            }
-            Some(Err(e)) => {
-                web_sys::console::warn_1(
-                    &format!("tessera: reading more of the index: {e}").into(),
-                );
-                self.grow_after_ms = time_ms + 2000.0;
-            }
-            _ => {}
+        if let Some(ix) = self.m.take_grown(time_ms) {
+            self.cache.set_nodes(0, &ix);
+            let mut store = TimedStore::of(
+                &mut self.cache,
+                &self.gpu,
+                self.quant_step,
+                &mut self.uploads,
+            );
+            self.m.set_index(ix, &mut store);
+            self.dirty = true;
         }
         let idle = self.converged && !moving && !self.dirty;
         let mut drew = false;
         if !idle {
             let camera = self.nav.camera();
-            let mut store = TimedStore {
-                inner: GpuStore {
-                    cache: &mut self.cache,
-                    device: &self.gpu.device,
-                    queue: &self.gpu.queue,
-                    quant_step: self.quant_step,
-                    model: 0,
-                },
-                times: &mut self.uploads,
-            };
-            self.stats = self
-                .scheduler
-                .frame(&camera, time_ms / 1e3, &mut self.source, &mut store);
-            if self.stats.index_wants > 0
-                && !self.growing.get()
-                && !self.index.is_complete()
-                && time_ms >= self.grow_after_ms
-            {
-                self.grow_index();
-            }
+            let mut store = TimedStore::of(
+                &mut self.cache,
+                &self.gpu,
+                self.quant_step,
+                &mut self.uploads,
+            );
+            self.m.frame(&camera, time_ms, &mut store);
             self.dirty = false;
             // A frame the canvas could not take (resized, lost) is drawn again next time.
             drew = self.draw(&camera);
             self.dirty |= !drew;
-            self.frames += 1;
-            if self.first_frame_ms.is_none() && self.stats.selected_nodes > 0 {
-                self.first_frame_ms = Some(now_ms() - self.opened_ms);
-            }
+            self.m.framed();
         }
-        let fetch = self.source.fetcher.borrow();
-        // Nodes whose bytes do not exist (a truncated file) stay missing: their parents
-        // are the view's final state, as long as nothing else failed (a network outage
-        // retried with backoff is not converged).
-        let gone = fetch.gone();
-        let misses_settled = self.stats.cache_misses == 0
-            || (self.stats.cache_misses <= gone.len()
-                && self.scheduler.failed().iter().all(|n| gone.contains(n)));
-        let converged = self.stats.pending_loads == 0
-            && misses_settled
-            && self.stats.index_wants == 0
-            && self.stats.morph_blending == 0
-            && fetch.pending() == 0
-            && fetch.undecoded() == 0
-            && !self.growing.get()
+        let converged = self.m.settled()
             && !self.nav.needs_update()
             && self.drag.is_none()
             && self.picks.is_empty()
-            && self.pick_in_flight.is_none()
-            && self.first_frame_ms.is_some();
+            && self.pick_in_flight.is_none();
         self.converged = converged;
-        if converged && self.converged_ms.is_none() {
-            self.converged_ms = Some(now_ms() - self.opened_ms);
-        }
-        let f = fetch.stats();
-        let main_decoded = f.decoded - f.worker_decoded;
-        let s = &self.stats;
+        self.m.converged(converged);
+        let s = &self.m.stats;
         let u = self.uploads;
         // The drawn patch with the largest texture: its size in the file and as
         // uploaded (from the first mip that fits the device's largest texture).
         let largest_texture = self
+            .m
             .scheduler
             .draw()
             .iter()
             .filter_map(|&n| {
                 let t = &self.cache.slot(n)?.texture.as_ref()?.texture;
-                let stored = self.index.nodes().get(n as usize)?.texture_size;
+                let stored = self.m.index.nodes().get(n as usize)?.texture_size;
                 Some((n, stored, [t.width(), t.height()]))
             })
             .max_by_key(|&(n, stored, _)| (stored[0].max(stored[1]), std::cmp::Reverse(n)))
             .map(
                 |(n, stored, uploaded)| json!({"node": n, "stored": stored, "uploaded": uploaded}),
             );
-        Ok(json!({
-            "idle": converged,
+        let mut out = self.m.stats_json(converged);
+        let own = json!({
             // Whether this call drew the canvas (a screenshot reads it right after).
             "drew": drew,
-            "frame": self.frames,
-            "nodes": s.selected_nodes,
-            "triangles": s.triangles,
-            "max_level": s.max_level,
-            "pending": s.pending_loads,
-            "in_flight": fetch.in_flight(),
-            "undecoded": fetch.undecoded(),
-            "bytes_received": self.source.http.bytes.get(),
-            "index_bytes": self.index_bytes,
-            "requests": self.source.http.requests.get(),
-            "failed_requests": f.failed_requests,
-            "failed_patches": s.failed_patches,
-            "index_nodes": self.index.nodes().len(),
-            "model_nodes": self.index.header().node_count,
             // GPU bytes of the resident patches, their textures (mips included) in
             // them, and the textures' part.
             "gpu_bytes": s.gpu_resident_bytes,
@@ -899,23 +1160,6 @@ impl Viewer {
             "adapter_max_texture_dim": self.gpu.adapter.limits().max_texture_dimension_2d,
             // {"node", "stored": [w, h], "uploaded": [w, h]} or null (no texture drawn).
             "largest_texture": largest_texture,
-            "ram_bytes": s.ram_resident_bytes,
-            "selection_ms": s.selection_ms,
-            // Patches decoded: all, and by the decode workers (their time is off the
-            // main thread, mips included); the decode_ms_* figures are this thread's
-            // (roots, and every patch without workers).
-            "decoded": f.decoded,
-            "worker_decoded": f.worker_decoded,
-            "worker_decode_ms_mean": if f.worker_decoded > 0 { f.worker_ms / f.worker_decoded as f64 } else { 0.0 },
-            "at_workers": fetch.at_workers(),
-            // Main-thread time taking the workers' replies in (copies).
-            "reply_ms_mean": if f.worker_decoded > 0 { f.reply_ms / f.worker_decoded as f64 } else { 0.0 },
-            "reply_ms_max": f.reply_max_ms,
-            "decode_workers": self.source.decoder.as_ref().map_or(0, |d| d.workers),
-            "workers_failed": self.source.workers_failed.get(),
-            "decode_ms_mean": if main_decoded > 0 { f.decode_ms / main_decoded as f64 } else { 0.0 },
-            "decode_ms_max": f.decode_max_ms,
-            "decode_ms_total": f.decode_ms,
             // Uploads into the GPU cache (main thread): textured patches make their
             // mip chain on the CPU there.
             "uploads": u.uploads,
@@ -923,16 +1167,15 @@ impl Viewer {
             "upload_ms_max": u.max_ms,
             "textured_uploads": u.textured,
             "textured_upload_ms_mean": if u.textured > 0 { u.textured_ms / u.textured as f64 } else { 0.0 },
-            "first_frame_ms": self.first_frame_ms,
-            "converged_ms": self.converged_ms,
             "adapter": self.gpu.adapter_label,
             "pivot": self.nav.pivot().to_array(),
-            // A problem that does not stop the view (a truncated file), or null.
-            "warning": self.warning,
             // Answers to point_at: [{"id", "point": [x, y, z] or null}].
             "picks": std::mem::take(&mut self.answers),
-        })
-        .to_string())
+        });
+        if let (Value::Object(o), Value::Object(mine)) = (&mut out, own) {
+            o.extend(mine);
+        }
+        Ok(out.to_string())
     }
 
     /// Draws and presents the frame; false when the canvas gave no texture.
@@ -948,9 +1191,9 @@ impl Viewer {
         };
         let view = frame.texture.create_view(&Default::default());
         // Near and far fitted to the drawn nodes' tight spheres, as the desktop viewer.
-        let origin = DVec3::from(self.index.header().cube_origin);
-        let nodes = self.index.nodes();
-        let spheres = self.scheduler.draw().iter().filter_map(|&n| {
+        let origin = DVec3::from(self.m.index.header().cube_origin);
+        let nodes = self.m.index.nodes();
+        let spheres = self.m.scheduler.draw().iter().filter_map(|&n| {
             let s = nodes.get(n as usize)?.tight_sphere;
             let c = origin + DVec3::new(f64::from(s[0]), f64::from(s[1]), f64::from(s[2]));
             Some((
@@ -966,7 +1209,7 @@ impl Viewer {
         self.drawn = Some((camera.clone(), planes));
         let params = FrameParams::with_planes(
             camera,
-            self.index.header().cube_origin,
+            self.m.index.header().cube_origin,
             planes,
             Shading::default(),
         );
@@ -979,8 +1222,9 @@ impl Viewer {
                 label: Some("tessera web frame"),
             });
         let cache = &self.cache;
-        let ratios = self.scheduler.morph_ratios();
+        let ratios = self.m.scheduler.morph_ratios();
         let slots = self
+            .m
             .scheduler
             .draw()
             .iter()
@@ -997,49 +1241,13 @@ impl Viewer {
         true
     }
 
-    /// Reads more of the paged index (doubling the pages read), off the frame.
-    fn grow_index(&mut self) {
-        self.growing.set(true);
-        let (http, sparse, grown, growing) = (
-            self.source.http.clone(),
-            self.sparse.clone(),
-            self.grown.clone(),
-            self.growing.clone(),
-        );
-        let base = self.index.clone();
-        let closed = self.source.closed.clone();
-        spawn_local(async move {
-            // Doubling the pages read until another level shows (a page may end inside
-            // a level, which stays hidden until it is whole), as `tessera-http` does.
-            let shown = base.nodes().len();
-            let mut cur = (*base).clone();
-            let r = loop {
-                let pages = (2 * cur.loaded_pages()).max(1);
-                match read_with(&http, &sparse, |s| cur.grown(s, pages)).await {
-                    Ok(next) if next.nodes().len() > shown || next.is_complete() => break Ok(next),
-                    Ok(next) => cur = next,
-                    Err(e) => break Err(e),
-                }
-            };
-            if !closed.get() {
-                *grown.borrow_mut() = Some(r);
-            }
-            growing.set(false);
-        });
-    }
-
     /// Decodes fetched patches with `decode` from now on: called with a job's bytes
     /// (a `Uint8Array`, `crate::wire`), it returns a promise of the reply's bytes (the
     /// page's decode workers run [`crate::worker::decode_job`] on it). `workers` is how
     /// many run at once. Without a decoder, or once it fails, patches are decoded on
     /// this thread between frames.
     pub fn set_decoder(&mut self, decode: js_sys::Function, workers: u32) {
-        self.source.decoder = (workers > 0).then(|| {
-            Rc::new(Decoders {
-                decode,
-                workers: workers as usize,
-            })
-        });
+        self.m.source.set_decoder(decode, workers);
     }
 
     /// The canvas was resized to `width` x `height` pixels.
@@ -1088,7 +1296,7 @@ impl Viewer {
 
     /// Changes the screen-space tolerance (pixels).
     pub fn set_tolerance_px(&mut self, tolerance_px: f32) {
-        self.scheduler.set_tolerance_px(tolerance_px);
+        self.m.scheduler.set_tolerance_px(tolerance_px);
         self.dirty = true;
     }
 
@@ -1191,9 +1399,9 @@ impl Viewer {
     pub fn pick(&self, x: f64, y: f64) -> js_sys::Promise {
         let camera = self.nav.camera();
         let ray = tessera_pick::Ray::through_pixel(&camera, x.floor() + 0.5, y.floor() + 0.5);
-        let reader = crate::plan::PickReader::new(self.index.clone());
-        let http = self.source.http.clone();
-        let closed = self.source.closed.clone();
+        let reader = crate::plan::PickReader::new(self.m.index.clone());
+        let http = self.m.source.http.clone();
+        let closed = self.m.source.closed.clone();
         wasm_bindgen_futures::future_to_promise(async move {
             let t0 = now_ms();
             let fail = |m: String| JsValue::from(js_sys::Error::new(&format!("pick: {m}")));
