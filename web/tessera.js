@@ -611,11 +611,13 @@ export const Tessera = {
    * larger patch textures are then uploaded from their first mip that fits),
    * workers (decode workers, default defaultWorkers(): the cores but one, 1 to 4,
    * shared by every view on the page; 0 decodes on the main thread, at most 6 ms a
-   * frame).
+   * frame), cancelRequests (default true: a range request none of whose patches the
+   * view has wanted for 4 frames is aborted, so a turned camera does not wait behind
+   * the bytes of the view it left; false lets every request finish).
    */
   async view(
     canvas,
-    { url, tolerancePx = 1, memoryBytes = 512 * 1048576, camera = null, autoResize = true, prefixBytes = 65536, maxTextureDim = null, workers = defaultWorkers() } = {},
+    { url, tolerancePx = 1, memoryBytes = 512 * 1048576, camera = null, autoResize = true, prefixBytes = 65536, maxTextureDim = null, workers = defaultWorkers(), cancelRequests = true } = {},
   ) {
     if (!url) throw new Error('Tessera.view: no model URL given');
     if (!hasWebGL2()) {
@@ -635,6 +637,7 @@ export const Tessera = {
       memoryBytes,
       prefixBytes,
       maxTextureDim,
+      cancelRequests,
       camera: camera == null ? null : typeof camera === 'string' ? JSON.parse(camera) : camera,
     });
     const viewer = await Viewer.open(canvas, abs, options);

@@ -46,7 +46,11 @@
 // the page's cube, the model alone screenshot to model_shot (the screenshot is then
 // the whole scene); with "lower_memory": BYTES the model's budget lowered to that and
 // the statistics once patches were evicted ("lowered"); the model's dispose() and
-// renderer.info.memory before and after).
+// renderer.info.memory before and after), "jumps" (with "jumps": {"latency_ms",
+// "cameras": [camera, ...], "dwell_ms"}: once idle, every response made latency_ms late
+// (CDP network emulation), the camera set to each in turn for dwell_ms, then waited to
+// idle: the stats before the jumps ("before"), ms from the last jump to idle ("ms"),
+// the camera then; the screenshot, if any, is taken after).
 // Exit 0 when every visit ran (whatever its outcome), 2 on a driver failure.
 
 import { readFileSync, writeFileSync } from 'node:fs';
@@ -308,6 +312,37 @@ for (const visit of plan.visits) {
       consoleLines.push(`driver: drop: ${e.message.split('\n')[0]}`);
     }
   }
+  // Optional: once idle, a slow network (CDP Network.emulateNetworkConditions: every
+  // response "latency_ms" late) and the camera jumped through "cameras" (setCamera,
+  // "dwell_ms" on each), then waited to idle: the stats when the jumps began
+  // ("before") and "ms" from the last jump to idle.
+  let jumps = null;
+  if (visit.jumps && outcome === 'idle') {
+    try {
+      const cdp = await context.newCDPSession(page);
+      await cdp.send('Network.enable');
+      await cdp.send('Network.emulateNetworkConditions', {
+        offline: false,
+        latency: visit.jumps.latency_ms,
+        downloadThroughput: -1,
+        uploadThroughput: -1,
+      });
+      jumps = { before: await page.evaluate(() => window.tesseraStats) };
+      for (const c of visit.jumps.cameras) {
+        await page.evaluate((c) => {
+          window.tesseraIdle = false;
+          window.tesseraView.setCamera(c);
+        }, c);
+        await page.waitForTimeout(visit.jumps.dwell_ms);
+      }
+      const t1 = Date.now();
+      await page.waitForFunction(() => window.tesseraIdle === true, null, { timeout: visit.timeout_ms || 60000, polling: 50 });
+      jumps.ms = Date.now() - t1;
+      jumps.camera = await page.evaluate(() => window.tesseraView.camera());
+    } catch (e) {
+      consoleLines.push(`driver: jumps: ${e.message.split('\n')[0]}`);
+    }
+  }
   const state = await page
     .evaluate(() => ({
       error: window.tesseraError,
@@ -523,7 +558,7 @@ for (const visit of plan.visits) {
   if (visit.screenshot && outcome === visit.expect && !visit.drop && !visit.three) {
     await page.locator('#view').screenshot({ path: visit.screenshot });
   }
-  results.push({ name: visit.name, outcome, ms, ...state, interaction, shot, touch, pick, measure, cycles, drop, three, console: consoleLines });
+  results.push({ name: visit.name, outcome, ms, ...state, interaction, shot, touch, pick, measure, cycles, drop, three, jumps, console: consoleLines });
   await context.close();
 }
 await browser.close();

@@ -24,6 +24,10 @@
 //! drawn, and once the proxy forwards again the view converges to `tessera render`'s
 //! cut and pixels, the notice gone).
 //!
+//! Request cancellation: on a network made 1 s slow (CDP), a camera jumping from one
+//! corner of a generated terrain to another has the requests of the view it left
+//! aborted (none with `?cancel=0`) and converges to the last camera's cut and pixels.
+//!
 //! Textured models (issue 11): the YCB scissors scan with a texture per patch converges
 //! in the page to `tessera render --complete`'s cut and pixels (PNG textures decoded in
 //! wasm, drawn through WebGL2), the `--ignore-textures` build of it far below; the HUD's
@@ -930,6 +934,115 @@ fn the_page_shows_the_model_as_tessera_render_and_errors_clearly() {
     assert_eq!(r[0]["outcome"], "error", "{:#}", r[0]);
     let text = r[0]["errorShown"].as_str().unwrap_or("");
     assert!(text.contains("WebGL2"), "no-webgl: the page shows {text:?}");
+}
+
+/// Request cancellation on a slow network: a generated terrain (400k triangles, 10
+/// levels), every response made 1 s late (CDP), the camera jumped from the overview to
+/// a view over one corner, half a second there (its requests in flight), then to
+/// another corner. The requests of the view it left are aborted (the control,
+/// `?cancel=0`, lets them finish), and the view converges to `tessera render
+/// --complete`'s cut and pixels of the last camera.
+#[test]
+fn camera_jumps_on_a_slow_network_abort_the_requests_of_the_views_left() {
+    let web = dist();
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let models = dir.join("models");
+    std::fs::create_dir(&models).unwrap();
+    let ply = dir.join("terrain.ply");
+    let model = models.join("terrain.tsr");
+    let (code, _, stderr) = run_tessera(args![
+        "gen",
+        "terrain",
+        "--triangles",
+        "400000",
+        "-o",
+        ply,
+        "--quiet"
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let (code, _, stderr) = run_tessera(args!["build", ply, "-o", model, "--quiet"]);
+    assert_eq!(code, 0, "{stderr}");
+    let (_server, addr) = serve(&models, &web);
+    // Over one corner of the unit square, looking out across it.
+    let corner = |x: f64, y: f64| {
+        let (dx, dy) = (x - 0.5, y - 0.5);
+        format!(
+            r#"{{"position": [{}, {}, 0.22], "target": [{x}, {y}, 0.02], "up": [0, 0, 1], "fov_y_deg": 30"#,
+            x - dx * 0.35,
+            y - dy * 0.35
+        )
+    };
+    let sized = |c: &str| -> Value {
+        serde_json::from_str(&format!(r#"{c}, "width": {WIDTH}, "height": {HEIGHT}}}"#)).unwrap()
+    };
+    let overview = r#"{"position": [0.5, -0.5, 1.1], "target": [0.5, 0.5, 0], "up": [0, 0, 1], "fov_y_deg": 45"#;
+    let last = corner(0.1, 0.9);
+    let jumps = json!({"latency_ms": 1000, "dwell_ms": 500, "cameras": [
+        sized(&corner(0.1, 0.1)), sized(&last),
+    ]});
+    let shot = dir.join("jumps.png");
+    let control_shot = dir.join("jumps-uncancelled.png");
+    let start = encode(&sized(overview).to_string());
+    let base = format!("http://{addr}");
+    let results = browse(
+        json!([
+            {"name": "jumps", "url": format!("{base}/?model=/models/terrain.tsr#camera={start}"),
+             "expect": "idle", "screenshot": shot, "timeout_ms": 120000, "viewport": [800, 480],
+             "jumps": jumps.clone()},
+            {"name": "jumps-uncancelled", "url": format!("{base}/?model=/models/terrain.tsr&cancel=0#camera={start}"),
+             "expect": "idle", "screenshot": control_shot, "timeout_ms": 120000, "viewport": [800, 480],
+             "jumps": jumps},
+        ]),
+        &[],
+        dir,
+    );
+    let (expected, triangles) = render(&model, &last, &dir.join("render-last"));
+    let (j, control) = (
+        result(&results, "jumps"),
+        result(&results, "jumps-uncancelled"),
+    );
+    for (r, path) in [(j, &shot), (control, &control_shot)] {
+        assert_eq!(r["outcome"], "idle", "{r:#}");
+        assert!(
+            r["jumps"]["ms"].is_u64(),
+            "the jumps did not end idle: {r:#}"
+        );
+        assert_eq!(r["stats"]["pending"], 0, "{r:#}");
+        assert_eq!(
+            r["stats"]["triangles"].as_u64(),
+            Some(triangles),
+            "{}: converged to another cut than tessera render --complete of the last camera",
+            r["name"]
+        );
+        let img = Image::load_png(path).unwrap();
+        let p = psnr(&img, &expected).unwrap_or(f64::INFINITY);
+        eprintln!(
+            "{}: PSNR {p:.2} dB against tessera render of the last camera",
+            r["name"]
+        );
+        assert!(
+            p >= MIN_PSNR_DB,
+            "{}: {p:.2} dB (kept in {})",
+            r["name"],
+            tmp.keep().display()
+        );
+    }
+    let (js, cs) = (&j["stats"], &control["stats"]);
+    eprintln!(
+        "camera jumps on a 1 s network: {} of {} requests cancelled ({} bytes not fetched), {} bytes received, idle {} ms after the last jump; without cancelling: {} requests, {} bytes, idle {} ms after",
+        js["cancelled_requests"], js["requests"], js["cancelled_bytes"], js["bytes_received"], j["jumps"]["ms"],
+        cs["requests"], cs["bytes_received"], control["jumps"]["ms"]
+    );
+    assert!(
+        js["cancelled_requests"].as_u64().unwrap() > 0
+            && js["cancelled_bytes"].as_u64().unwrap() > 0,
+        "no request was cancelled while the camera jumped: {js:#}"
+    );
+    assert_eq!(
+        cs["cancelled_requests"], 0,
+        "cancelled with ?cancel=0: {cs:#}"
+    );
 }
 
 /// The Bunny built into `dir/models/bunny.tsr`; the models directory and the file.

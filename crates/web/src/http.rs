@@ -67,9 +67,23 @@ impl Http {
 
     /// `GET` of `range` (clamped to the file when `first`).
     pub async fn get(&self, range: Range<u64>, first: bool) -> Result<Vec<u8>, HttpError> {
+        self.get_abortable(range, first, None).await
+    }
+
+    /// [`Http::get`], aborted when `signal` is (an `AbortController`'s): the fetch
+    /// rejects, and so does this, with [`HttpError::Transient`].
+    pub async fn get_abortable(
+        &self,
+        range: Range<u64>,
+        first: bool,
+        signal: Option<&web_sys::AbortSignal>,
+    ) -> Result<Vec<u8>, HttpError> {
         let fatal = |m: String| HttpError::Fatal(m);
         let init = web_sys::RequestInit::new();
         init.set_method("GET");
+        if let Some(s) = signal {
+            init.set_signal(Some(s));
+        }
         let headers = web_sys::Headers::new().map_err(|e| fatal(js_message(&e)))?;
         headers
             .set("Range", &range_header(&range))

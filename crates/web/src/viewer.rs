@@ -13,6 +13,7 @@ use std::rc::Rc;
 use std::sync::Arc;
 
 use glam::DVec3;
+use rustc_hash::FxHashMap;
 use serde_json::{json, Value};
 use tessera_format::{Grid, ModelIndex, PatchData, ATTR_COLORS, ATTR_TEXTURE};
 use tessera_nav::{Aabb, Navigator};
@@ -95,14 +96,16 @@ async fn read_with<T>(
 }
 
 /// The patch source: range requests through [`Fetcher`] (coalesced, at most 3 in
-/// flight), decoded by the page's decode workers ([`Viewer::set_decoder`]), or between
-/// frames on this thread without them.
+/// flight, aborted when the view no longer wants them), decoded by the page's decode
+/// workers ([`Viewer::set_decoder`]), or between frames on this thread without them.
 pub(crate) struct Remote {
     pub http: Rc<Http>,
     pub fetcher: Rc<RefCell<Fetcher>>,
     /// An error that stops streaming (the model changed on the server).
     pub fatal: Rc<RefCell<Option<String>>>,
     pub closed: Rc<Cell<bool>>,
+    /// The requests in flight, by the fetcher's id, to abort.
+    aborts: Aborts,
     /// The roots, fetched and decoded while opening (answered by `read_now`).
     roots: Vec<Answer>,
     /// The page's decode workers, if any.
@@ -112,6 +115,9 @@ pub(crate) struct Remote {
     /// Make textures' mips in the workers (a textured model).
     mips: bool,
 }
+
+/// The abort controllers of the requests in flight.
+type Aborts = Rc<RefCell<FxHashMap<u64, web_sys::AbortController>>>;
 
 /// The page's decode function (a job's bytes in, a promise of the reply's bytes:
 /// `crate::wire`) and how many workers run it.
@@ -139,6 +145,7 @@ impl Remote {
             fetcher: Rc::new(RefCell::new(Fetcher::new(index.clone()))),
             fatal: Rc::new(RefCell::new(None)),
             closed: Rc::new(Cell::new(false)),
+            aborts: Rc::default(),
             roots,
             decoder: None,
             workers_failed: Rc::new(Cell::new(false)),
@@ -178,13 +185,34 @@ impl Remote {
 
     /// Sends what the fetcher wants sent; each answer sends more.
     fn pump(&self) {
-        pump(
-            &self.http,
-            &self.fetcher,
-            &self.fatal,
-            &self.closed,
-            &self.dispatcher(),
-        );
+        pump(&Pipes {
+            http: self.http.clone(),
+            fetcher: self.fetcher.clone(),
+            fatal: self.fatal.clone(),
+            closed: self.closed.clone(),
+            aborts: self.aborts.clone(),
+            workers: self.dispatcher(),
+        });
+    }
+
+    /// Aborts the requests the fetcher cancelled (the view no longer wants them).
+    fn abort_cancelled(&self) {
+        let ids = self.fetcher.borrow_mut().take_cancelled();
+        let mut aborts = self.aborts.borrow_mut();
+        for id in ids {
+            if let Some(c) = aborts.remove(&id) {
+                c.abort();
+            }
+        }
+    }
+
+    /// Stops streaming: requests in flight are aborted, their answers and the decode
+    /// workers' land nowhere, no new ones start.
+    pub fn close(&self) {
+        self.closed.set(true);
+        for (_, c) in self.aborts.borrow_mut().drain() {
+            c.abort();
+        }
     }
 
     fn dispatcher(&self) -> Option<Dispatch> {
@@ -248,13 +276,26 @@ fn dispatch(d: &Dispatch) {
     }
 }
 
-fn pump(
-    http: &Rc<Http>,
-    fetcher: &Rc<RefCell<Fetcher>>,
-    fatal: &Rc<RefCell<Option<String>>>,
-    closed: &Rc<Cell<bool>>,
-    workers: &Option<Dispatch>,
-) {
+/// What sending requests needs, cloned into each request's future.
+#[derive(Clone)]
+struct Pipes {
+    http: Rc<Http>,
+    fetcher: Rc<RefCell<Fetcher>>,
+    fatal: Rc<RefCell<Option<String>>>,
+    closed: Rc<Cell<bool>>,
+    aborts: Aborts,
+    workers: Option<Dispatch>,
+}
+
+fn pump(p: &Pipes) {
+    let Pipes {
+        http,
+        fetcher,
+        fatal,
+        closed,
+        aborts,
+        ..
+    } = p;
     if closed.get() || fatal.borrow().is_some() {
         return;
     }
@@ -274,16 +315,29 @@ fn pump(
             );
             continue;
         }
-        let (http, fetcher, fatal, closed, workers) = (
-            http.clone(),
-            fetcher.clone(),
-            fatal.clone(),
-            closed.clone(),
-            workers.clone(),
-        );
+        // Without an AbortController (none in this context) the request just runs on.
+        let abort = web_sys::AbortController::new().ok();
+        if let Some(c) = &abort {
+            aborts.borrow_mut().insert(req.id, c.clone());
+        }
+        let p = p.clone();
         spawn_local(async move {
-            let r = http.get(req.range.clone(), false).await;
-            if closed.get() {
+            let signal = abort.as_ref().map(|c| c.signal());
+            let r = p
+                .http
+                .get_abortable(req.range.clone(), false, signal.as_ref())
+                .await;
+            p.aborts.borrow_mut().remove(&req.id);
+            let Pipes {
+                fetcher,
+                fatal,
+                closed,
+                workers,
+                ..
+            } = &p;
+            // Closed, or cancelled: the fetcher forgot the request (an answer would
+            // be dropped anyway).
+            if closed.get() || signal.is_some_and(|s| s.aborted()) {
                 return;
             }
             let r = match r {
@@ -296,10 +350,10 @@ fn pump(
             };
             fetcher.borrow_mut().complete(req.id, r);
             // The fetched patches go to the workers now, not at the next frame.
-            if let Some(d) = &workers {
+            if let Some(d) = workers {
                 dispatch(d);
             }
-            pump(&http, &fetcher, &fatal, &closed, &workers);
+            pump(&p);
         });
     }
 }
@@ -339,6 +393,7 @@ fn workers_failed(
 impl PatchSource for Remote {
     fn request(&mut self, wanted: &[(u32, f32)]) {
         self.fetcher.borrow_mut().set_wanted(wanted);
+        self.abort_cancelled();
         self.pump();
     }
     fn poll(&mut self, out: &mut Vec<Answer>) {
@@ -602,8 +657,8 @@ pub(crate) struct Streamed {
 
 impl Drop for Streamed {
     fn drop(&mut self) {
-        // Requests in flight finish into nothing; no new ones start.
-        self.source.closed.set(true);
+        // Requests in flight are aborted; no new ones start.
+        self.source.close();
     }
 }
 
@@ -721,6 +776,10 @@ impl Streamed {
             "index_bytes": self.index_bytes,
             "requests": self.source.http.requests.get(),
             "failed_requests": f.failed_requests,
+            // Requests aborted because the view stopped wanting them, and the bytes
+            // they asked for.
+            "cancelled_requests": f.cancelled_requests,
+            "cancelled_bytes": f.cancelled_bytes,
             "failed_patches": s.failed_patches,
             "index_nodes": self.index.nodes().len(),
             "model_nodes": self.index.header().node_count,
@@ -943,7 +1002,8 @@ impl Viewer {
     /// `prefixBytes` (bytes of the first request, default 64 KiB: the header and the
     /// top of the index of most models; what it lacks is fetched after),
     /// `maxTextureDim` (default: the adapter's; lower makes a device whose largest
-    /// texture is that, as a smaller GPU's, at least the canvas's size).
+    /// texture is that, as a smaller GPU's, at least the canvas's size),
+    /// `cancelRequests` (default true: requests the view stopped wanting are aborted).
     /// Errors carry a message meant for the page.
     pub async fn open(
         canvas: web_sys::HtmlCanvasElement,
@@ -1040,6 +1100,11 @@ impl Viewer {
         cache.set_textured(0, textured);
         let mut scheduler = new_scheduler(&index, tolerance_px, memory);
         let mut source = Remote::new(http, &index, roots, textured);
+        // `cancelRequests: false` lets requests the view stopped wanting finish (to
+        // compare).
+        if opts["cancelRequests"] == Value::Bool(false) {
+            source.fetcher.borrow_mut().set_cancel(false);
+        }
         let quant_step = grid.step();
         let mut uploads = UploadTimes::default();
         scheduler.load_roots(

@@ -130,6 +130,12 @@ struct Fake<'a> {
     jobs: Vec<(u32, Vec<u8>)>,
     worker_dies_every: usize,
     jobs_run: usize,
+    /// Polls a request stays in flight before its answer comes (0: the next poll), and
+    /// each request's age.
+    latency_polls: u32,
+    ages: Vec<u32>,
+    /// Requests aborted (cancelled by the fetcher while in flight).
+    aborted: Vec<Request>,
 }
 
 impl<'a> Fake<'a> {
@@ -151,6 +157,9 @@ impl<'a> Fake<'a> {
             jobs: Vec::new(),
             worker_dies_every: worker_dies_every.unwrap_or(0),
             jobs_run: 0,
+            latency_polls: 0,
+            ages: Vec::new(),
+            aborted: Vec::new(),
         }
     }
 
@@ -159,10 +168,22 @@ impl<'a> Fake<'a> {
             assert!(self.fetcher.in_flight() <= MAX_IN_FLIGHT);
             self.sent.push(r.clone());
             self.in_flight.push(r);
+            self.ages.push(0);
         }
     }
     fn deliver(&mut self) {
-        while let Some(r) = self.in_flight.pop() {
+        for a in &mut self.ages {
+            *a += 1;
+        }
+        // Answered newest first (out of order), once old enough.
+        let mut due = Vec::new();
+        for i in (0..self.in_flight.len()).rev() {
+            if self.ages[i] > self.latency_polls {
+                self.ages.remove(i);
+                due.push(self.in_flight.remove(i));
+            }
+        }
+        for r in due {
             let body = if self.fail_every > 0 && r.id % self.fail_every == self.fail_every - 1 {
                 Err("connection reset".to_string())
             } else {
@@ -176,6 +197,16 @@ impl<'a> Fake<'a> {
 impl PatchSource for Fake<'_> {
     fn request(&mut self, wanted: &[(u32, f32)]) {
         self.fetcher.set_wanted(wanted);
+        // As the viewer: abort what the fetcher cancels.
+        for id in self.fetcher.take_cancelled() {
+            let i = self
+                .in_flight
+                .iter()
+                .position(|r| r.id == id)
+                .expect("a cancelled request is in flight");
+            self.ages.remove(i);
+            self.aborted.push(self.in_flight.remove(i));
+        }
         self.pump();
     }
     fn poll(&mut self, out: &mut Vec<Answer>) {
@@ -234,11 +265,15 @@ impl PatchSource for Direct<'_> {
 }
 
 fn camera(index: &ModelIndex) -> Camera {
+    camera_at(index, 30.0, 1.6)
+}
+
+fn camera_at(index: &ModelIndex, azimuth_deg: f64, radii: f64) -> Camera {
     let b = index.header().bounding_sphere;
     Camera::orbit(&Orbit {
         center: [b[0], b[1], b[2]],
-        radius: b[3] * 1.6,
-        azimuth_deg: 30.0,
+        radius: b[3] * radii,
+        azimuth_deg,
         elevation_deg: 20.0,
         width: 640,
         height: 480,
@@ -260,6 +295,10 @@ fn direct_cut(index: &ModelIndex, file: &[u8]) -> (Vec<u32>, u32) {
 }
 
 fn converge<S: PatchSource>(index: &ModelIndex, src: &mut S) -> (Vec<u32>, u32) {
+    converge_at(index, src, &camera(index))
+}
+
+fn converge_at<S: PatchSource>(index: &ModelIndex, src: &mut S, cam: &Camera) -> (Vec<u32>, u32) {
     let mut sched = Scheduler::new(
         index,
         SchedulerOptions {
@@ -269,9 +308,8 @@ fn converge<S: PatchSource>(index: &ModelIndex, src: &mut S) -> (Vec<u32>, u32) 
         },
     );
     let mut store = CountingStore::default();
-    let cam = camera(index);
     for f in 0..400u32 {
-        let st = sched.frame(&cam, f as f64 / 60.0, src, &mut store);
+        let st = sched.frame(cam, f as f64 / 60.0, src, &mut store);
         if f > 2 && st.pending_loads == 0 && st.cache_misses == 0 {
             let mut d = sched.draw().to_vec();
             d.sort_unstable();
@@ -349,6 +387,139 @@ fn coalesced_out_of_order_fetches_converge_to_the_direct_cut() {
     d.sort_unstable();
     assert_eq!(d, direct);
     assert!(flaky.fetcher.stats().failed_requests > 0);
+}
+
+/// Requests take 6 frames; the camera looks at one side of the model close up for
+/// [`TURN_AT`] frames, then turns to the other side: the requests for the side it left are
+/// cancelled (aborted) a few frames later, none of them is answered, and the view
+/// converges to the direct cut of where it looks, fetching fewer bytes than without
+/// cancelling. A request whose nodes come back into the view in time is not cancelled.
+const TURN_AT: u32 = 80;
+
+#[test]
+fn a_turned_view_cancels_the_requests_it_no_longer_wants() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = model(dir.path());
+    let index = Arc::new(ModelIndex::read(file.as_slice()).unwrap());
+    let away = camera_at(&index, 30.0, 1.05);
+    let back = camera_at(&index, 210.0, 1.6);
+    let (direct, _) = converge_at(
+        &index,
+        &mut Direct {
+            index: &index,
+            file: &file,
+            wanted: Vec::new(),
+        },
+        &back,
+    );
+
+    let run = |cancel: bool| {
+        let mut fake = Fake::new(&file, &index, 0, None);
+        fake.latency_polls = 6;
+        fake.fetcher.set_cancel(cancel);
+        let mut sched = Scheduler::new(
+            &index,
+            SchedulerOptions {
+                prefetch: false,
+                clock: || 0.0,
+                ..Default::default()
+            },
+        );
+        let mut store = CountingStore::default();
+        // Long enough for a few levels under the close-up's side to be asked for.
+        for f in 0..TURN_AT {
+            sched.frame(&away, f as f64 / 60.0, &mut fake, &mut store);
+        }
+        let sent_away = fake.sent.len();
+        let mut converged = None;
+        for f in TURN_AT..600u32 {
+            let st = sched.frame(&back, f as f64 / 60.0, &mut fake, &mut store);
+            if st.pending_loads == 0 && st.cache_misses == 0 && fake.fetcher.in_flight() == 0 {
+                converged = Some(f);
+                break;
+            }
+        }
+        let f = converged.expect("the turned view converges");
+        let mut d = sched.draw().to_vec();
+        d.sort_unstable();
+        assert_eq!(d, direct, "the cut after the turn (cancel: {cancel})");
+        (fake, sent_away, f)
+    };
+    let (with, sent_away, frames) = run(true);
+    let (without, _, frames_without) = run(false);
+    let s = with.fetcher.stats();
+    assert!(sent_away > 0);
+    assert!(
+        s.cancelled_requests > 0,
+        "nothing was cancelled: {s:?}, {sent_away} sent before the turn"
+    );
+    assert_eq!(s.cancelled_requests as usize, with.aborted.len());
+    // Only requests sent for the view it left were cancelled.
+    assert!(with.aborted.iter().all(|r| r.id < sent_away as u64));
+    assert_eq!(without.fetcher.stats().cancelled_requests, 0);
+    assert!(without.aborted.is_empty());
+    let (b_with, b_without) = (s.bytes, without.fetcher.stats().bytes);
+    assert!(
+        b_with < b_without,
+        "bytes received: {b_with} with cancelling, {b_without} without"
+    );
+    eprintln!(
+        "turned view: {} of {sent_away} requests cancelled ({} bytes not fetched); received \
+         {b_with} bytes against {b_without} without cancelling; converged at frame {frames} \
+         (without: {frames_without})",
+        s.cancelled_requests, s.cancelled_bytes
+    );
+
+    // Nodes wanted again within CANCEL_AFTER_WANTS sets keep their request.
+    use tessera_web::plan::{CANCEL_AFTER_WANTS, MAX_IN_FLIGHT};
+    let [a, b, c, d] = [direct[0], direct[1], direct[2], direct[3]];
+    let mut f = Fetcher::new(index.clone());
+    f.set_wanted(&[(a, 1.0)]);
+    let r = f.next_request().unwrap();
+    assert_eq!(r.nodes, vec![a]);
+    for _ in 1..CANCEL_AFTER_WANTS {
+        f.set_wanted(&[]);
+    }
+    f.set_wanted(&[(a, 1.0)]);
+    for _ in 1..CANCEL_AFTER_WANTS {
+        f.set_wanted(&[]);
+    }
+    assert!(f.take_cancelled().is_empty());
+    // Unwanted long enough, but nothing waits for its slot: it finishes.
+    f.set_wanted(&[]);
+    assert!(f.take_cancelled().is_empty());
+    // Every slot taken, then another node wanted: the oldest unwanted request goes.
+    let mut ids = Vec::new();
+    for n in [b, c] {
+        f.set_wanted(&[(n, 1.0)]);
+        let q = f.next_request().unwrap();
+        assert_eq!(q.nodes, vec![n]);
+        ids.push(q.id);
+    }
+    assert_eq!(f.in_flight(), MAX_IN_FLIGHT);
+    for _ in 0..CANCEL_AFTER_WANTS {
+        f.set_wanted(&[(d, 1.0)]);
+    }
+    assert_eq!(
+        f.take_cancelled(),
+        vec![r.id],
+        "one slot is needed, the oldest's"
+    );
+    assert_eq!(f.in_flight(), MAX_IN_FLIGHT - 1);
+    assert_eq!(f.next_request().unwrap().nodes, vec![d]);
+    // Its answer, if it still comes, is dropped; the node can be asked for again.
+    f.complete(
+        r.id,
+        Ok(file[r.range.start as usize..r.range.end as usize].to_vec()),
+    );
+    assert_eq!(f.undecoded(), 0);
+    assert!(f.take_cancelled().is_empty(), "nothing waits");
+    // Asked for again: b's request (unwanted, the oldest now) makes room for it.
+    f.set_wanted(&[(a, 1.0)]);
+    assert_eq!(f.take_cancelled(), vec![ids[0]]);
+    let again = f.next_request().unwrap();
+    assert_eq!(again.nodes, r.nodes);
+    assert_ne!(again.id, r.id);
 }
 
 /// Decoding in workers (jobs out, replies back a frame later, out of order, some
