@@ -73,7 +73,8 @@ export class TesseraModel extends THREE.Group {
   /**
    * Opens the model at `url` (HTTP Range support needed). Options: tolerancePx
    * (default 1), memoryBytes (default 512 MiB: half for the meshes' arrays and
-   * textures, a quarter for decoded patches waiting), workers (decode workers, default
+   * textures, a quarter for decoded patches waiting; shared with the page's other
+   * models and views as Tessera.view's), workers (decode workers, default
    * the cores but one, 1 to 4; 0 decodes on the main thread, at most 6 ms a frame),
    * prefixBytes (first request, default 64 KiB), maxTextureDim (default 4096: larger
    * patch textures are handed over from their first mip that fits; pass

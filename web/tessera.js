@@ -602,7 +602,9 @@ export const Tessera = {
   /**
    * Opens the model at `url` (served with HTTP Range support) in `canvas`.
    * Options: tolerancePx (default 1), memoryBytes (default 512 MiB: half GPU, a
-   * quarter decoded patches), camera (docs/camera.md; default the home view),
+   * quarter decoded patches; the views and three.js models of a page share one budget,
+   * the largest of theirs, split each frame by what each view needs, none getting more
+   * than its own; stats.page_models counts them), camera (docs/camera.md; default the home view),
    * autoResize (default true: the canvas follows its CSS size times devicePixelRatio;
    * false keeps canvas.width x canvas.height), prefixBytes (bytes of the first range
    * request, default 64 KiB: the header and the top of the index of most models),

@@ -50,7 +50,11 @@
 // "cameras": [camera, ...], "dwell_ms"}: once idle, every response made latency_ms late
 // (CDP network emulation), the camera set to each in turn for dwell_ms, then waited to
 // idle: the stats before the jumps ("before"), ms from the last jump to idle ("ms"),
-// the camera then; the screenshot, if any, is taken after).
+// the camera then; the screenshot, if any, is taken after), "shared" (with "shared":
+// {"model", "size": [w, h], "memory_bytes", "count", "camera"} on web/tests/blank.html:
+// `count` views of the model on canvases of that size, each opened with memoryBytes,
+// waited until all are idle: their stats ("open"); then all but the last disposed and
+// the last waited until it has run a frame and is idle again: its stats ("alone")).
 // Exit 0 when every visit ran (whatever its outcome), 2 on a driver failure.
 
 import { readFileSync, writeFileSync } from 'node:fs';
@@ -141,7 +145,7 @@ for (const visit of plan.visits) {
     await page.goto(visit.url, { waitUntil: 'load', timeout: visit.timeout_ms || 60000 });
     // A page of cycles runs nothing until the driver does; one to drop the connection
     // of waits only for the first frame drawn.
-    const handle = visit.cycles
+    const handle = visit.cycles || visit.shared
       ? null
       : await page.waitForFunction(
           visit.drop
@@ -278,6 +282,46 @@ for (const visit of plan.visits) {
       cycles = { before, per_cycle, raf_last_second: r1 - r0 };
     } catch (e) {
       consoleLines.push(`driver: cycles: ${e.message.split('\n')[0]}`);
+    }
+  }
+  // Optional: views sharing the page's memory (see the top of this file).
+  let shared = null;
+  if (visit.shared && outcome !== 'timeout') {
+    try {
+      shared = await page.evaluate(async ({ model, size, memory_bytes, count, camera }) => {
+        const { Tessera } = await import('./tessera.js');
+        const settle = (v) =>
+          new Promise((resolve, reject) => {
+            const timer = setTimeout(() => reject(new Error(`no convergence in 60 s: ${JSON.stringify(v.stats)}`)), 60000);
+            const check = () => {
+              if (v.idle) {
+                clearTimeout(timer);
+                resolve(v.stats);
+              } else setTimeout(check, 50);
+            };
+            check();
+          });
+        const views = [];
+        for (let k = 0; k < count; k++) {
+          const c = document.createElement('canvas');
+          [c.width, c.height] = size;
+          document.body.appendChild(c);
+          views.push(await Tessera.view(c, { url: model, autoResize: false, memoryBytes: memory_bytes, camera }));
+        }
+        // Idle together: each once more after the others (a share may move as they load).
+        for (let round = 0; round < 2; round++) for (const v of views) await settle(v);
+        const open = views.map((v) => v.stats);
+        const last = views[views.length - 1];
+        const frame = last.stats.frame;
+        for (const v of views.slice(0, -1)) v.dispose();
+        const t = Date.now();
+        while (last.stats.frame === frame && Date.now() - t < 5000) await new Promise((r) => setTimeout(r, 20));
+        const alone = await settle(last);
+        last.dispose();
+        return { open, alone };
+      }, visit.shared);
+    } catch (e) {
+      consoleLines.push(`driver: shared: ${e.message.split('\n')[0]}`);
     }
   }
   // Optional: the connection dropped mid-stream after the first frame, then back.
@@ -558,7 +602,7 @@ for (const visit of plan.visits) {
   if (visit.screenshot && outcome === visit.expect && !visit.drop && !visit.three) {
     await page.locator('#view').screenshot({ path: visit.screenshot });
   }
-  results.push({ name: visit.name, outcome, ms, ...state, interaction, shot, touch, pick, measure, cycles, drop, three, jumps, console: consoleLines });
+  results.push({ name: visit.name, outcome, ms, ...state, interaction, shot, touch, pick, measure, cycles, drop, three, jumps, shared, console: consoleLines });
   await context.close();
 }
 await browser.close();

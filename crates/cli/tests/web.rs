@@ -28,6 +28,10 @@
 //! corner of a generated terrain to another has the requests of the view it left
 //! aborted (none with `?cancel=0`) and converges to the last camera's cut and pixels.
 //!
+//! Two views on one page share its memory budget: each gets its share (the two within
+//! the page's total), both settle on what fits, and the one left after a dispose takes
+//! the whole budget and converges to the full cut.
+//!
 //! Textured models (issue 11): the YCB scissors scan with a texture per patch converges
 //! in the page to `tessera render --complete`'s cut and pixels (PNG textures decoded in
 //! wasm, drawn through WebGL2), the `--ignore-textures` build of it far below; the HUD's
@@ -947,22 +951,7 @@ fn camera_jumps_on_a_slow_network_abort_the_requests_of_the_views_left() {
     let web = dist();
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
-    let models = dir.join("models");
-    std::fs::create_dir(&models).unwrap();
-    let ply = dir.join("terrain.ply");
-    let model = models.join("terrain.tsr");
-    let (code, _, stderr) = run_tessera(args![
-        "gen",
-        "terrain",
-        "--triangles",
-        "400000",
-        "-o",
-        ply,
-        "--quiet"
-    ]);
-    assert_eq!(code, 0, "{stderr}");
-    let (code, _, stderr) = run_tessera(args!["build", ply, "-o", model, "--quiet"]);
-    assert_eq!(code, 0, "{stderr}");
+    let (models, model) = build_terrain(dir);
     let (_server, addr) = serve(&models, &web);
     // Over one corner of the unit square, looking out across it.
     let corner = |x: f64, y: f64| {
@@ -976,7 +965,7 @@ fn camera_jumps_on_a_slow_network_abort_the_requests_of_the_views_left() {
     let sized = |c: &str| -> Value {
         serde_json::from_str(&format!(r#"{c}, "width": {WIDTH}, "height": {HEIGHT}}}"#)).unwrap()
     };
-    let overview = r#"{"position": [0.5, -0.5, 1.1], "target": [0.5, 0.5, 0], "up": [0, 0, 1], "fov_y_deg": 45"#;
+    let overview = TERRAIN_OVERVIEW;
     let last = corner(0.1, 0.9);
     let jumps = json!({"latency_ms": 1000, "dwell_ms": 500, "cameras": [
         sized(&corner(0.1, 0.1)), sized(&last),
@@ -1042,6 +1031,114 @@ fn camera_jumps_on_a_slow_network_abort_the_requests_of_the_views_left() {
     assert_eq!(
         cs["cancelled_requests"], 0,
         "cancelled with ?cancel=0: {cs:#}"
+    );
+}
+
+/// A generated terrain (400k triangles over the unit square, z up, 10 levels) built
+/// into `dir/models/terrain.tsr`; the models directory and the file.
+fn build_terrain(dir: &Path) -> (PathBuf, PathBuf) {
+    let models = dir.join("models");
+    std::fs::create_dir_all(&models).unwrap();
+    let ply = dir.join("terrain.ply");
+    let model = models.join("terrain.tsr");
+    let (code, _, stderr) = run_tessera(args![
+        "gen",
+        "terrain",
+        "--triangles",
+        "400000",
+        "-o",
+        ply,
+        "--quiet"
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let (code, _, stderr) = run_tessera(args!["build", ply, "-o", model, "--quiet"]);
+    assert_eq!(code, 0, "{stderr}");
+    (models, model)
+}
+
+/// The overview of the terrain of [`build_terrain`] (without its closing brace, for
+/// `render`).
+const TERRAIN_OVERVIEW: &str =
+    r#"{"position": [0.5, -0.5, 1.1], "target": [0.5, 0.5, 0], "up": [0, 0, 1], "fov_y_deg": 45"#;
+
+/// Many models on one page share its memory budget (`crates/web/src/budget.rs`): two
+/// views of the terrain's overview, each opened with 4 MiB (2 MiB of store, less
+/// than the 1.5 MiB the overview's cut needs, twice), split the page's 2 MiB between
+/// them and settle on coarser cuts within it (idle: what the budget allows is shown,
+/// nothing fetched again and again); once one is disposed the other takes the whole
+/// budget and converges to `tessera render --complete`'s cut.
+#[test]
+fn views_on_one_page_share_its_memory_budget() {
+    let web = dist();
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let (models, model) = build_terrain(dir);
+    let www = web_copy(dir, &web);
+    let (_server, addr) = serve(&models, &www);
+    let memory: u64 = 4 << 20;
+    let store = memory / 2;
+    let camera: Value = serde_json::from_str(&format!(
+        r#"{TERRAIN_OVERVIEW}, "width": {WIDTH}, "height": {HEIGHT}}}"#
+    ))
+    .unwrap();
+    let base = format!("http://{addr}");
+    let shared = |count: u32| {
+        json!({"model": format!("{base}/models/terrain.tsr"), "size": [WIDTH, HEIGHT],
+               "memory_bytes": memory, "count": count, "camera": camera})
+    };
+    let results = browse_alone(
+        json!([
+            {"name": "two", "url": format!("{base}/blank.html"), "expect": "loaded",
+             "timeout_ms": 180000, "shared": shared(2)},
+        ]),
+        &[],
+        dir,
+    );
+    let r = result(&results, "two");
+    let sh = &r["shared"];
+    assert!(sh.is_object(), "no shared result: {r:#}");
+    let (_, full) = render(&model, TERRAIN_OVERVIEW, &dir.join("render-overview"));
+    let open = sh["open"].as_array().unwrap();
+    let alone = &sh["alone"];
+    let n = |v: &Value, k: &str| v[k].as_u64().unwrap_or_else(|| panic!("{k}: {v:#}"));
+    for v in open {
+        eprintln!(
+            "two views: {} triangles, {} of {} budget bytes on the GPU, {} groups left out, {} requests",
+            n(v, "triangles"), n(v, "gpu_bytes"), n(v, "gpu_budget_bytes"), n(v, "budget_limited"), n(v, "requests")
+        );
+        assert_eq!(n(v, "page_models"), 2, "{v:#}");
+        assert_eq!(n(v, "pending"), 0, "{v:#}");
+        assert!(n(v, "gpu_bytes") <= n(v, "gpu_budget_bytes"), "{v:#}");
+        assert!(
+            n(v, "triangles") < full,
+            "a view of the two holds the whole cut: {v:#}"
+        );
+        // Settled, not fetching the same patches again and again: a few requests per
+        // node drawn at most.
+        assert!(n(v, "requests") < 4 * n(v, "index_nodes"), "{v:#}");
+    }
+    let budgets: u64 = open.iter().map(|v| n(v, "gpu_budget_bytes")).sum();
+    let held: u64 = open.iter().map(|v| n(v, "gpu_bytes")).sum();
+    assert!(
+        budgets <= store,
+        "the views' budgets {budgets} exceed the page's {store}"
+    );
+    assert!(
+        held <= store,
+        "the views hold {held} bytes, over the page's {store}"
+    );
+    eprintln!(
+        "alone: {} triangles ({full} for tessera render --complete), {} of {} budget bytes",
+        n(alone, "triangles"),
+        n(alone, "gpu_bytes"),
+        n(alone, "gpu_budget_bytes")
+    );
+    assert_eq!(n(alone, "page_models"), 1, "{alone:#}");
+    assert_eq!(n(alone, "gpu_budget_bytes"), store, "{alone:#}");
+    assert_eq!(
+        n(alone, "triangles"),
+        full,
+        "alone, the view converges to the whole cut: {alone:#}"
     );
 }
 

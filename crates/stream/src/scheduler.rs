@@ -178,6 +178,11 @@ pub struct FrameStats {
     /// Groups blending in after arriving late, and groups waiting for such a blend
     /// before they refine (progressive frames): the view is still changing.
     pub morph_blending: usize,
+    /// Groups the view needs that this frame neither loaded nor asked for because the
+    /// budgets are full (the store of groups in use, or RAM of the more urgent groups
+    /// being assembled): with nothing pending, the view has done what its budgets
+    /// allow (progressive frames).
+    pub budget_limited: usize,
 }
 
 impl FrameStats {
@@ -209,6 +214,7 @@ impl FrameStats {
             out.morph_mean += s.morph_mean * s.selected_nodes as f32;
             out.morph_max = out.morph_max.max(s.morph_max);
             out.morph_blending += s.morph_blending;
+            out.budget_limited += s.budget_limited;
         }
         if out.selected_nodes > 0 {
             out.morph_mean /= out.selected_nodes as f32;
@@ -1012,6 +1018,10 @@ impl Scheduler {
         let mut budget = self.opts.upload_budget_bytes;
         let mut wanted: Vec<(u32, f32)> = Vec::new();
         let mut stale = false;
+        // RAM the groups asked for take once complete: only groups that fit in RAM
+        // together are asked for (see below).
+        let ram_budget = self.ram.budget();
+        let mut planned = 0u64;
         for round in 0..MAX_UPLOAD_ROUNDS {
             let ts = clock();
             if round > 0 {
@@ -1021,6 +1031,7 @@ impl Scheduler {
             let needed = self.needed_groups();
             stats.selection_ms += clock() - ts;
             wanted.clear();
+            planned = 0;
             let uploads_before = stats.patches_uploaded;
             // Hysteresis: evict first what even a view with spheres grown by
             // UNLOAD_GROWTH (more than the prefetch growth) would not need.
@@ -1031,10 +1042,32 @@ impl Scheduler {
                     .iter()
                     .all(|&x| should_unload(nv, x, &view, UNLOAD_GROWTH))
             };
-            for &(g, pri) in &needed {
+            stats.budget_limited = 0;
+            for (i, &(g, pri)) in needed.iter().enumerate() {
                 if group_failed(groups, &self.failed, g) {
                     continue;
                 }
+                // A group is assembled in RAM (decoded) before its upload. Groups are
+                // asked for, most urgent first, only while they fit in the RAM budget
+                // together: more would not all fit, so arrivals would be refused or
+                // evict each other's patches, to be fetched again and again while none
+                // completes. One that does not fit beside the more urgent ones is not
+                // asked for and its patches in RAM are not touched (they make room).
+                let group_ram: u64 = groups
+                    .members(g)
+                    .iter()
+                    .filter(|&&m| !self.res.resident[m as usize])
+                    .map(|&m| {
+                        self.ram
+                            .bytes_of(m)
+                            .unwrap_or_else(|| estimate_decoded(&self.facts[m as usize]))
+                    })
+                    .sum();
+                if planned > 0 && planned + group_ram > ram_budget {
+                    stats.budget_limited += 1;
+                    continue;
+                }
+                planned += group_ram;
                 let mut patches: Vec<(u32, Arc<PatchData>)> = Vec::new();
                 let mut all = true;
                 for &m in groups.members(g) {
@@ -1059,6 +1092,7 @@ impl Scheduler {
                 // then uploaded again: churn), within the budget and the store. One
                 // larger than the whole budget is skipped (a shared budget may grow).
                 if size > self.res.lru.budget() {
+                    stats.budget_limited += 1;
                     continue;
                 }
                 let refs: Vec<&PatchData> = patches.iter().map(|(_, p)| p.as_ref()).collect();
@@ -1072,6 +1106,7 @@ impl Scheduler {
                     // budget that grows, in a scene, would fill with whatever is
                     // small instead of what matters most). At most this group's bytes
                     // stay unused.
+                    stats.budget_limited += needed.len() - i;
                     break;
                 }
                 let mut whole = true;
@@ -1120,10 +1155,40 @@ impl Scheduler {
         if !self.blocked.is_empty() {
             self.want_demand(&mut wanted);
         }
-        // Prefetch: lower priorities than anything visible.
-        for &(n, pri) in &self.prefetch {
-            if !self.res.resident[n as usize] && !self.ram.contains(n) && !self.failed.contains(&n)
-            {
+        // Prefetch: lower priorities than anything visible, in the RAM the visible
+        // groups leave (as above: a prefetch set larger than that would evict itself,
+        // fetched again and again). The most urgent first when not all of it fits.
+        let (res, ram, failed, facts) = (&self.res, &self.ram, &self.failed, &self.facts);
+        let mut fresh: Vec<(u32, f32, u64)> = self
+            .prefetch
+            .iter()
+            .filter(|&&(n, _)| !res.resident[n as usize] && !failed.contains(&n))
+            .map(|&(n, pri)| {
+                let held = ram.bytes_of(n);
+                (
+                    n,
+                    pri,
+                    held.unwrap_or_else(|| estimate_decoded(&facts[n as usize])),
+                )
+            })
+            .collect();
+        // None while the view needs more than the store holds: its own cut comes
+        // first (prefetched patches would only take the RAM its groups need).
+        let room = if stats.wanted_bytes > self.res.lru.budget() {
+            0
+        } else {
+            ram_budget.saturating_sub(planned)
+        };
+        if fresh.iter().map(|f| f.2).sum::<u64>() > room {
+            fresh.sort_by(|a, b| b.1.total_cmp(&a.1));
+            let mut taken = 0u64;
+            fresh.retain(|f| {
+                taken += f.2;
+                taken <= room
+            });
+        }
+        for (n, pri, _) in fresh {
+            if !ram.contains(n) {
                 wanted.push((n, pri.min(PREFETCH_PRIORITY_MAX)));
             }
         }
@@ -1427,6 +1492,14 @@ fn group_closure(
 /// Whether a member of group `g` failed (such a group can never be complete).
 fn group_failed(groups: &Groups, failed: &FxHashSet<u32>, g: u32) -> bool {
     groups.members(g).iter().any(|m| failed.contains(m))
+}
+
+/// [`decoded_bytes`] of a patch not loaded yet, from its node's counts, on the high
+/// side: every vertex attribute a patch may have (position, normal, morph target,
+/// colour, UV) and, for a texture, its texels, their mips and as much again encoded.
+fn estimate_decoded(f: &NodeFacts) -> u64 {
+    let texels = u64::from(f.texture_size[0]) * u64::from(f.texture_size[1]);
+    u64::from(f.vertices) * 48 + u64::from(f.triangles) * 12 + texels * 4 * 2
 }
 
 /// Bytes a decoded patch occupies in RAM (array payloads, the texture's texels and

@@ -20,6 +20,9 @@
 //!   (a one-pixel pass packing the depth's bits into RGBA8), for zoom to the cursor,
 //!   double-click recentre and pinch about the fingers.
 //!
+//! - [`budget`]: one memory budget for every model on the page (views and three.js
+//!   models), split each frame by their demand as the desktop splits its scene's.
+//!   Plain Rust, tested natively.
 //! - [`wire`]: the messages to and from the decode workers (a job: a fetched patch and
 //!   what decoding it needs from its node record; a reply: the decoded patch, its
 //!   texture's mips included, flattened into one transferable buffer). Plain Rust,
@@ -39,6 +42,7 @@
 // The frame statistics' `json!` object is larger than the macro's default depth.
 #![recursion_limit = "256"]
 
+pub mod budget;
 pub mod plan;
 pub mod wire;
 

@@ -268,11 +268,11 @@ impl Stream {
         self.m.scheduler.set_tolerance_px(tolerance_px);
     }
 
-    /// Changes the memory budget (bytes; split as at open): lowering it evicts down to
-    /// it at the next frame (unused patches first, then the drawn cut coarsened).
+    /// Changes the memory budget (bytes; split as at open, and shared with the page's
+    /// other models as at open): lowering it evicts down to it at the next frame
+    /// (unused patches first, then the drawn cut coarsened).
     pub fn set_memory_bytes(&mut self, bytes: f64) {
-        let b = bytes.max(0.0) as u64;
-        self.m.scheduler.set_budgets(b / 2, b / 4);
+        self.m.set_memory(bytes.max(0.0) as u64);
     }
 
     /// Model coordinates of the origin the patch positions are relative to.

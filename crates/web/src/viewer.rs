@@ -20,7 +20,8 @@ use tessera_nav::{Aabb, Navigator};
 use tessera_render::{clip_planes_along, FrameParams, Gpu, GpuCache, GpuStore, Renderer, Shading};
 use tessera_select::Camera;
 use tessera_stream::{
-    Answer, FrameStats, PatchSource, ResidentStore, Scheduler, SchedulerOptions, StoreError,
+    Answer, FrameStats, ModelDemand, PatchSource, ResidentStore, Scheduler, SchedulerOptions,
+    StoreError,
 };
 use wasm_bindgen::prelude::*;
 use wasm_bindgen_futures::spawn_local;
@@ -171,9 +172,11 @@ impl Remote {
         // Nodes whose bytes do not exist (a truncated file) stay missing: their parents
         // are the view's final state, as long as nothing else failed (a network outage
         // retried with backoff is not converged).
+        // Nor do nodes the budgets leave out (with nothing pending: what they allow is
+        // shown).
         let gone = fetch.gone();
         let misses_settled = stats.cache_misses == 0
-            || (stats.cache_misses <= gone.len()
+            || ((stats.cache_misses <= gone.len() || stats.budget_limited > 0)
                 && scheduler.failed().iter().all(|n| gone.contains(n)));
         stats.pending_loads == 0
             && misses_settled
@@ -653,6 +656,8 @@ pub(crate) struct Streamed {
     frames: u64,
     /// Why part of the model cannot be shown (a truncated file), for the page.
     warning: Option<String>,
+    /// The model's place in the page's budgets (shared by every model on the page).
+    budget: crate::budget::Registration,
 }
 
 impl Drop for Streamed {
@@ -672,7 +677,6 @@ impl Streamed {
     ) -> Streamed {
         Streamed {
             index,
-            scheduler,
             source,
             stats: FrameStats::default(),
             sparse: rest.sparse,
@@ -685,7 +689,16 @@ impl Streamed {
             index_bytes: rest.index_bytes,
             frames: 0,
             warning: rest.warning,
+            // The scheduler's budgets at open are the model's own.
+            budget: crate::budget::Registration::new(scheduler.budgets()),
+            scheduler,
         }
+    }
+
+    /// Changes the model's own memory budget (split as at open; its share of the
+    /// page's from the next frame on).
+    pub fn set_memory(&mut self, bytes: u64) {
+        self.budget.set_cap((bytes / 2, bytes / 4));
     }
 
     /// An index grown since the last frame, showing more nodes (the caller readies its
@@ -716,6 +729,11 @@ impl Streamed {
     /// The scheduler's frame of `camera` at `time_ms` over `store`; more of the index
     /// read when the view wants detail it does not show yet.
     pub fn frame(&mut self, camera: &Camera, time_ms: f64, store: &mut impl ResidentStore) {
+        // This frame's share of the page's budgets, by the last frame's demand.
+        let (store_budget, ram_budget) = self.budget.update(time_ms / 1e3, self.demand());
+        if (store_budget, ram_budget) != self.scheduler.budgets() {
+            self.scheduler.set_budgets(store_budget, ram_budget);
+        }
         self.stats = self
             .scheduler
             .frame(camera, time_ms / 1e3, &mut self.source, store);
@@ -732,6 +750,21 @@ impl Streamed {
                 &self.growing,
             );
         }
+    }
+
+    /// What the model asks of the page's budgets: its last frame's.
+    fn demand(&self) -> ModelDemand {
+        ModelDemand {
+            wanted_bytes: self.stats.wanted_bytes,
+            pinned_bytes: self.scheduler.pinned_bytes(),
+            resident_bytes: self.scheduler.resident_bytes(),
+        }
+    }
+
+    /// Whether the page's split has moved this model's budgets since its last frame
+    /// (another model came, went or wants more): an idle view runs a frame to follow.
+    pub fn budget_moved(&mut self, time_ms: f64) -> bool {
+        self.budget.update(time_ms / 1e3, self.demand()) != self.scheduler.budgets()
     }
 
     /// Counts a frame shown (after [`Streamed::frame`] and its draw).
@@ -780,6 +813,10 @@ impl Streamed {
             // they asked for.
             "cancelled_requests": f.cancelled_requests,
             "cancelled_bytes": f.cancelled_bytes,
+            // Models on the page sharing its memory budget (crate::budget).
+            "page_models": self.budget.page_models(),
+            // Groups the view needs that its budgets leave out this frame.
+            "budget_limited": s.budget_limited,
             "failed_patches": s.failed_patches,
             "index_nodes": self.index.nodes().len(),
             "model_nodes": self.index.header().node_count,
@@ -1167,7 +1204,8 @@ impl Viewer {
             self.m.set_index(ix, &mut store);
             self.dirty = true;
         }
-        let idle = self.converged && !moving && !self.dirty;
+        // (An idle view follows its share of the page's budgets too.)
+        let idle = self.converged && !moving && !self.dirty && !self.m.budget_moved(time_ms);
         let mut drew = false;
         if !idle {
             let camera = self.nav.camera();

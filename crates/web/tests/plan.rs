@@ -638,3 +638,83 @@ fn a_pick_fetching_as_it_goes_equals_the_pick_over_the_whole_file() {
     assert!(hits >= 3, "the rays miss the model");
     assert!(hits < 5, "the corner ray should miss");
 }
+
+/// A view needing more than its budget settles on what fits: the requests stop (no
+/// patch fetched again and again, decoded, refused and asked for once more).
+#[test]
+fn an_over_budget_view_settles_and_stops_fetching() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = model(dir.path());
+    let index = Arc::new(ModelIndex::read(file.as_slice()).unwrap());
+    let cam = camera_at(&index, 30.0, 1.05);
+    let wanted = {
+        let mut fake = Fake::new(&file, &index, 0, None);
+        let mut sched = Scheduler::new(
+            &index,
+            SchedulerOptions {
+                clock: || 0.0,
+                ..Default::default()
+            },
+        );
+        let mut store = CountingStore::default();
+        let mut w = 0;
+        for f in 0..300u32 {
+            w = sched
+                .frame(&cam, f as f64 / 60.0, &mut fake, &mut store)
+                .wanted_bytes;
+        }
+        w
+    };
+    // The store short of the view's cut, with RAM for a third of it, for a twentieth
+    // (less than the groups the view asks for), with and without prefetching; and the
+    // store shorter still.
+    for (store_frac, ram_frac, prefetch) in [
+        (0.6, 0.3, true),
+        (0.6, 0.05, false),
+        (0.6, 0.05, true),
+        (0.3, 0.3, true),
+    ] {
+        let mut fake = Fake::new(&file, &index, 0, None);
+        fake.latency_polls = 3;
+        let mut sched = Scheduler::new(
+            &index,
+            SchedulerOptions {
+                clock: || 0.0,
+                store_budget_bytes: (wanted as f64 * store_frac) as u64,
+                ram_budget_bytes: (wanted as f64 * ram_frac) as u64,
+                prefetch,
+                ..Default::default()
+            },
+        );
+        let mut store = CountingStore::default();
+        let mut sent = Vec::new();
+        let mut last = None;
+        for f in 0..1200u32 {
+            last = Some(sched.frame(&cam, f as f64 / 60.0, &mut fake, &mut store));
+            if f % 200 == 199 {
+                sent.push(fake.sent.len());
+            }
+        }
+        let st = last.unwrap();
+        // How often the most fetched patch was fetched.
+        let mut counts = rustc_hash::FxHashMap::<u32, u32>::default();
+        for r in &fake.sent {
+            for &n in &r.nodes {
+                *counts.entry(n).or_default() += 1;
+            }
+        }
+        let most = counts.values().copied().max().unwrap_or(0);
+        eprintln!(
+            "store {store_frac} and RAM {ram_frac} of the view's {wanted} bytes, prefetch \
+             {prefetch}: requests by 200 frames {sent:?} (a patch fetched {most} times at \
+             most), pending {}, in flight {}",
+            st.pending_loads,
+            fake.fetcher.in_flight()
+        );
+        assert_eq!(
+            sent[sent.len() - 1],
+            sent[sent.len() - 2],
+            "requests go on: {sent:?}"
+        );
+    }
+}
