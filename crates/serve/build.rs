@@ -38,6 +38,12 @@ fn main() {
          /// `web/dist` was not built (`scripts/build-web`) before this crate.\n\
          pub static EMBEDDED_WEB: &[(&str, &[u8])] = &[\n",
     );
+    // Their gzipped copies (`NAME.gz`, written by scripts/build-web beside the files
+    // that compress), sent to clients that accept gzip.
+    let mut gzipped = String::from(
+        "/// Gzipped copies of [`EMBEDDED_WEB`]'s files that compress (name, bytes).\n\
+         pub static EMBEDDED_WEB_GZIP: &[(&str, &[u8])] = &[\n",
+    );
     if FILES.iter().all(|f| dist.join(f).is_file()) {
         // An optional file added later changes the directory.
         println!("cargo:rerun-if-changed={}", dist.display());
@@ -49,6 +55,20 @@ fn main() {
                 "    ({f:?}, include_bytes!({:?})),\n",
                 p.display().to_string()
             );
+            let gz = dist.join(format!("{f}.gz"));
+            // Only a copy at least as new as the file (a stale one would be wrong).
+            let newer = |a: &PathBuf, b: &PathBuf| {
+                let m = |p: &PathBuf| std::fs::metadata(p).and_then(|m| m.modified()).ok();
+                m(a).zip(m(b)).is_some_and(|(a, b)| a >= b)
+            };
+            if gz.is_file() && newer(&gz, &p) {
+                let gz = gz.canonicalize().unwrap();
+                println!("cargo:rerun-if-changed={}", gz.display());
+                gzipped += &format!(
+                    "    ({f:?}, include_bytes!({:?})),\n",
+                    gz.display().to_string()
+                );
+            }
         }
     } else {
         // Built later: the directory (or its parent, while it does not exist) changes.
@@ -59,6 +79,8 @@ fn main() {
         };
         println!("cargo:rerun-if-changed={}", watch.display());
     }
+    code += "];\n";
+    code += &gzipped;
     code += "];\n";
     let out = PathBuf::from(std::env::var_os("OUT_DIR").unwrap()).join("embedded_web.rs");
     if std::fs::read_to_string(&out).ok().as_deref() != Some(code.as_str()) {

@@ -130,14 +130,16 @@ async fn dispatch(AxState(st): AxState<St>, req: Request) -> Response<Body> {
     let head = method == Method::HEAD;
     let work = async {
         match route {
-            Route::Root if st.web.is_some() => static_file(&st, "/index.html").await,
+            Route::Root if st.web.is_some() => {
+                static_file(&st, &parts.headers, "/index.html").await
+            }
             Route::Root => text(
                 StatusCode::OK,
                 "tessera serve: the model catalogue is at /api/models; no viewer page is \
                  served here (`--web DIR` serves one, as does a tessera built after \
                  scripts/build-web)\n",
             ),
-            Route::Static(p) => static_file(&st, &p).await,
+            Route::Static(p) => static_file(&st, &parts.headers, &p).await,
             Route::Catalogue => catalogue(&st).await,
             Route::Model(raw) => model(&st, &parts.headers, &raw, head).await,
         }
@@ -179,11 +181,37 @@ fn content_type(name: &str) -> &'static str {
     }
 }
 
+/// Whether an `Accept-Encoding` header accepts gzip (`gzip` or `*`, not at `q=0`).
+pub fn accepts_gzip(headers: &HeaderMap) -> bool {
+    let mut gzip = None;
+    let mut star = None;
+    for v in headers.get_all(header::ACCEPT_ENCODING) {
+        let Ok(v) = v.to_str() else { continue };
+        for item in v.split(',') {
+            let mut parts = item.split(';');
+            let coding = parts.next().unwrap_or("").trim().to_ascii_lowercase();
+            let q = parts
+                .filter_map(|p| p.trim().strip_prefix("q="))
+                .find_map(|q| q.trim().parse::<f32>().ok())
+                .unwrap_or(1.0);
+            match coding.as_str() {
+                "gzip" | "x-gzip" => gzip = Some(q > 0.0),
+                "*" => star = Some(q > 0.0),
+                _ => {}
+            }
+        }
+    }
+    gzip.or(star).unwrap_or(false)
+}
+
 /// A file of the web directory: every segment of `path` percent-decoded and checked
 /// like a model name (no separators, control characters or leading dots), the result
 /// resolved inside the directory (symbolic links out of it are not followed), read
-/// whole (the viewer's files are small); or the embedded file of that name.
-async fn static_file(st: &St, path: &str) -> Response<Body> {
+/// whole (the viewer's files are small); or the embedded file of that name. To a
+/// client that accepts gzip, its gzipped copy (`NAME.gz`, which `scripts/build-web`
+/// writes beside the files that compress; in a directory only when at least as new
+/// as the file) with `Content-Encoding: gzip`.
+async fn static_file(st: &St, headers: &HeaderMap, path: &str) -> Response<Body> {
     let mut rel = std::path::PathBuf::new();
     for seg in path.trim_start_matches('/').split('/') {
         match decode_name(seg) {
@@ -192,12 +220,22 @@ async fn static_file(st: &St, path: &str) -> Response<Body> {
         }
     }
     let name = rel.to_string_lossy().into_owned();
-    let read = match &st.web {
+    let gzip = accepts_gzip(headers);
+    // (The body, whether it is the gzipped copy.)
+    let read: Option<(bytes::Bytes, bool)> = match &st.web {
         Web::None => None,
-        Web::Embedded(files) => files
-            .iter()
-            .find(|(n, _)| *n == name)
-            .map(|(_, b)| bytes::Bytes::from_static(b)),
+        Web::Embedded(files) => {
+            let find = |list: &'static [(&'static str, &'static [u8])]| {
+                list.iter()
+                    .find(|(n, _)| *n == name)
+                    .map(|(_, b)| bytes::Bytes::from_static(b))
+            };
+            find(files).map(|raw| match find(crate::EMBEDDED_WEB_GZIP) {
+                // (Only with the binary's own files, of which these are the copies.)
+                Some(gz) if gzip && std::ptr::eq(*files, crate::EMBEDDED_WEB) => (gz, true),
+                _ => (raw, false),
+            })
+        }
         Web::Dir(root) => {
             let root = root.clone();
             tokio::task::spawn_blocking(move || {
@@ -205,14 +243,30 @@ async fn static_file(st: &St, path: &str) -> Response<Body> {
                 if !p.starts_with(&root) || !p.is_file() {
                     return None;
                 }
-                std::fs::read(p).ok().map(bytes::Bytes::from)
+                if gzip {
+                    let mut gz = p.clone().into_os_string();
+                    gz.push(".gz");
+                    let gz = std::path::PathBuf::from(gz);
+                    let modified =
+                        |p: &std::path::Path| std::fs::metadata(p).and_then(|m| m.modified()).ok();
+                    let fresh = modified(&gz).zip(modified(&p)).is_some_and(|(g, f)| g >= f);
+                    let inside = std::fs::canonicalize(&gz).is_ok_and(|g| g.starts_with(&root));
+                    if fresh && inside {
+                        if let Ok(b) = std::fs::read(&gz) {
+                            return Some((bytes::Bytes::from(b), true));
+                        }
+                    }
+                }
+                std::fs::read(p)
+                    .ok()
+                    .map(|b| (bytes::Bytes::from(b), false))
             })
             .await
             .ok()
             .flatten()
         }
     };
-    let Some(body) = read else {
+    let Some((body, gzipped)) = read else {
         return text(StatusCode::NOT_FOUND, "not found\n");
     };
     let n = body.len();
@@ -222,6 +276,11 @@ async fn static_file(st: &St, path: &str) -> Response<Body> {
         header::CONTENT_TYPE,
         HeaderValue::from_static(content_type(&name)),
     );
+    if gzipped {
+        h.insert(header::CONTENT_ENCODING, HeaderValue::from_static("gzip"));
+    }
+    // The body depends on the request's Accept-Encoding (for caches).
+    h.insert(header::VARY, HeaderValue::from_static("accept-encoding"));
     h.insert(header::CONTENT_LENGTH, HeaderValue::from(n));
     h.insert(header::CACHE_CONTROL, HeaderValue::from_static("no-cache"));
     r
@@ -570,4 +629,29 @@ fn entry_path(models: &Models, name: &str) -> String {
         .lookup(name)
         .map(|e| e.path.display().to_string())
         .unwrap_or_else(|| name.to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn accept_encoding() {
+        let h = |v: &str| {
+            let mut m = HeaderMap::new();
+            m.insert(header::ACCEPT_ENCODING, HeaderValue::from_str(v).unwrap());
+            accepts_gzip(&m)
+        };
+        assert!(h("gzip"));
+        assert!(h("gzip, deflate, br, zstd"));
+        assert!(h("br;q=1.0, GZIP;q=0.5"));
+        assert!(h("*"));
+        assert!(h("x-gzip"));
+        assert!(!h("gzip;q=0"));
+        assert!(!h("gzip;q=0.0, *"));
+        assert!(!h("*;q=0"));
+        assert!(!h("identity"));
+        assert!(!h("br, deflate"));
+        assert!(!accepts_gzip(&HeaderMap::new()));
+    }
 }

@@ -38,7 +38,12 @@
 //!   no-cache`. Without it, the same files of the viewer built into the binary
 //!   ([`EMBEDDED_WEB`]: `build.rs` embeds `web/dist` when `scripts/build-web` has built
 //!   it), unless [`ServeOptions::embedded_web`] is off; with neither, `/` answers one
-//!   line of text.
+//!   line of text. A client that accepts gzip gets a file's gzipped copy with
+//!   `Content-Encoding: gzip` where there is one (`NAME.gz`, written by
+//!   `scripts/build-web` beside the files that compress: embedded as
+//!   [`EMBEDDED_WEB_GZIP`], or beside the file in the directory when at least as new;
+//!   the `.wasm` goes out at about a third of its size), `Vary: Accept-Encoding` on
+//!   every one. Models are never compressed (range requests address their bytes).
 //! - CORS for embedding: `Access-Control-Allow-Origin: *`, methods `GET, HEAD, OPTIONS`,
 //!   the `Range`, `If-Range` and other conditional request headers allowed,
 //!   `Content-Range`, `Content-Length`, `ETag`, `Accept-Ranges`, `Last-Modified` exposed.

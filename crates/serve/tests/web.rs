@@ -84,6 +84,40 @@ fn start_with(
     Ok((format!("http://{addr}"), tx))
 }
 
+/// GET with `Accept-Encoding: accept`: status, Content-Encoding, Vary and the body as
+/// sent (not decoded).
+fn get_encoded(url: &str, accept: &str) -> (u16, Option<String>, Option<String>, Vec<u8>) {
+    let agent = ureq::Agent::new_with_config(
+        ureq::Agent::config_builder()
+            .http_status_as_error(false)
+            .timeout_global(Some(Duration::from_secs(20)))
+            .build(),
+    );
+    let mut r = agent
+        .get(url)
+        .header("accept-encoding", accept)
+        .call()
+        .unwrap();
+    let h = |k: &str| {
+        let v: Vec<&str> = r
+            .headers()
+            .get_all(k)
+            .iter()
+            .filter_map(|v| v.to_str().ok())
+            .collect();
+        (!v.is_empty()).then(|| v.join(", "))
+    };
+    let (enc, vary) = (h("content-encoding"), h("vary"));
+    let body = r.body_mut().read_to_vec().unwrap();
+    (r.status().as_u16(), enc, vary, body)
+}
+
+fn gunzip(b: &[u8]) -> Vec<u8> {
+    let mut out = Vec::new();
+    std::io::Read::read_to_end(&mut flate2::read::GzDecoder::new(b), &mut out).unwrap();
+    out
+}
+
 fn get(url: &str) -> (u16, Option<String>, Vec<u8>) {
     let agent = ureq::Agent::new_with_config(
         ureq::Agent::config_builder()
@@ -132,6 +166,35 @@ fn the_web_directory_is_served_at_the_root() {
         (200, Some("text/javascript; charset=utf-8"))
     );
     assert_eq!(get(&format!("{base}/sub/x.json")).0, 200);
+    // Gzipped copies beside the files (as scripts/build-web writes them): sent to a
+    // client that accepts gzip, when at least as new as the file.
+    let js = "export const big = '".to_string() + &"tessera ".repeat(500) + "';\n";
+    std::fs::write(web.join("app.js"), &js).unwrap();
+    let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::best());
+    std::io::Write::write_all(&mut gz, js.as_bytes()).unwrap();
+    std::fs::write(web.join("app.js.gz"), gz.finish().unwrap()).unwrap();
+    let (s, enc, vary, body) = get_encoded(&format!("{base}/app.js"), "gzip, deflate, br");
+    assert_eq!((s, enc.as_deref()), (200, Some("gzip")));
+    assert!(vary.is_some_and(|v| v.to_ascii_lowercase().contains("accept-encoding")));
+    assert!(body.len() * 10 < js.len(), "{} of {}", body.len(), js.len());
+    assert_eq!(gunzip(&body), js.as_bytes());
+    for accept in ["identity", "gzip;q=0", "br"] {
+        let (s, enc, _, body) = get_encoded(&format!("{base}/app.js"), accept);
+        assert_eq!(
+            (s, enc.as_deref(), body.as_slice()),
+            (200, None, js.as_bytes()),
+            "{accept}"
+        );
+    }
+    // A copy older than its file is stale: the file goes out as it is.
+    let f = std::fs::File::options()
+        .write(true)
+        .open(web.join("app.js.gz"))
+        .unwrap();
+    f.set_modified(std::time::SystemTime::now() - Duration::from_secs(3600))
+        .unwrap();
+    let (_, enc, _, body) = get_encoded(&format!("{base}/app.js"), "gzip");
+    assert_eq!((enc, body.as_slice()), (None, js.as_bytes()));
     for bad in [
         "/missing.js",
         "/.secret",
@@ -210,6 +273,33 @@ fn the_embedded_viewer_is_the_built_one() {
                 "/{name} is not {}: build tessera-serve again after scripts/build-web",
                 dist.join(name).display()
             );
+        }
+        // Gzipped to a browser (it accepts gzip): the .wasm about a third of its size,
+        // the same bytes once decoded.
+        for name in [
+            "tessera_web_bg.wasm",
+            "tessera_web.js",
+            "index.html",
+            "three/three.module.js",
+        ] {
+            let file = std::fs::read(dist.join(name)).unwrap();
+            let (s, enc, vary, body) =
+                get_encoded(&format!("{base}/{name}"), "gzip, deflate, br, zstd");
+            assert_eq!((s, enc.as_deref()), (200, Some("gzip")), "{name}");
+            assert!(vary.is_some_and(|v| v.to_ascii_lowercase().contains("accept-encoding")));
+            assert!(
+                body.len() * 10 < file.len() * 9,
+                "{name}: {} of {}",
+                body.len(),
+                file.len()
+            );
+            assert!(
+                gunzip(&body) == file,
+                "{name}: the gzipped copy is not the file"
+            );
+            if name.ends_with(".wasm") {
+                eprintln!("{name}: {} bytes, {} sent gzipped", file.len(), body.len());
+            }
         }
         // The page's own source is what was built (web/ against web/dist).
         let web = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../web");
