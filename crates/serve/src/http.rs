@@ -30,8 +30,12 @@ pub enum Web {
     None,
     /// A directory (canonical path): `tessera serve --web DIR`.
     Dir(std::path::PathBuf),
-    /// The viewer built into the binary ([`crate::EMBEDDED_WEB`]).
-    Embedded(&'static [(&'static str, &'static [u8])]),
+    /// The viewer built into the binary: its files and their gzipped copies
+    /// ([`crate::EMBEDDED_WEB`], [`crate::EMBEDDED_WEB_GZIP`]).
+    Embedded(
+        &'static [(&'static str, &'static [u8])],
+        &'static [(&'static str, &'static [u8])],
+    ),
 }
 
 impl Web {
@@ -224,15 +228,14 @@ async fn static_file(st: &St, headers: &HeaderMap, path: &str) -> Response<Body>
     // (The body, whether it is the gzipped copy.)
     let read: Option<(bytes::Bytes, bool)> = match &st.web {
         Web::None => None,
-        Web::Embedded(files) => {
+        Web::Embedded(files, gzipped) => {
             let find = |list: &'static [(&'static str, &'static [u8])]| {
                 list.iter()
                     .find(|(n, _)| *n == name)
                     .map(|(_, b)| bytes::Bytes::from_static(b))
             };
-            find(files).map(|raw| match find(crate::EMBEDDED_WEB_GZIP) {
-                // (Only with the binary's own files, of which these are the copies.)
-                Some(gz) if gzip && std::ptr::eq(*files, crate::EMBEDDED_WEB) => (gz, true),
+            find(files).map(|raw| match find(gzipped) {
+                Some(gz) if gzip => (gz, true),
                 _ => (raw, false),
             })
         }

@@ -199,7 +199,7 @@ impl Server {
         };
         let web = match &opts.web_dir {
             None if opts.embedded_web && !EMBEDDED_WEB.is_empty() => {
-                http::Web::Embedded(EMBEDDED_WEB)
+                http::Web::Embedded(EMBEDDED_WEB, EMBEDDED_WEB_GZIP)
             }
             None => http::Web::None,
             Some(d) => {
