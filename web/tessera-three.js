@@ -18,6 +18,7 @@
 //   model.addEventListener('error', (e) => ...); // streaming stopped (e.message)
 //   model.stats;                                 // {triangles, nodes, pending, resident_bytes, meshes, ...}
 //   model.setTolerancePx(2); model.setMemoryBytes(128 << 20);  // at run time
+//   model.setMorph(false);                       // geomorphing off (on by default)
 //   model.dispose();                             // frees every geometry, texture, material
 //
 // Coordinates: the object's local frame is the model's own coordinates (those of the
@@ -29,15 +30,26 @@
 // `model.center`, `model.size` (of the roots' box), `model.upAxis` and `model.upVector`
 // (the guessed up direction) help placing it.
 //
-// Not done here: geomorphing (the canvas viewer's vertex shader blends each patch
-// toward its parent; these meshes are drawn at their own level, so a refinement pops
-// in), and depth-based picking (use three.js raycasting on the meshes).
+// Geomorphing (GoLD), as the canvas viewer: a patch that refines its parent comes in
+// at its parent's shape and blends to its own, and one coarsening out blends back, so
+// nothing pops. Each mesh carries its vertices' morph targets (attributes
+// `tesseraTarget`, `tesseraTargetNormal`, `tesseraTargetColor` or `tesseraTargetUv`:
+// the positions, normals, colours and texture coordinates they take in the parent's
+// shape, found by the GPU cache's own lookup in crates/render) and its material blends
+// toward them by the node's ratio (uniform `tesseraRatio`: 0 its own shape, 1 its
+// parent's), patched into three.js's standard shader (`morphMaterial`). Textured
+// patches also sample no finer than their parent's texel detail while they morph
+// (`tesseraMinLod`), as the native shader. Not done here: depth-based picking (use
+// three.js raycasting on the meshes: it sees each mesh at its own shape).
 //
 // Materials: untextured models share one MeshStandardMaterial (vertex colours when the
-// model has them, converted to linear as three.js expects; else a clay colour);
-// textured models get one per patch with its texture (sRGB, mipmapped by WebGL). Pass
-// `material: (patch) => THREE.Material` to make your own (disposed with its mesh unless
-// it is `shared`: the same material for every patch, disposed by dispose()).
+// model has them, converted to linear as three.js expects; else a clay colour), and a
+// mesh takes a morphing copy of it (one shader program for all) only while its ratio is
+// above 0; textured models get one per patch with its texture (sRGB, mipmapped by
+// WebGL), morphing. Pass `material: (patch) => THREE.Material` to make your own
+// (disposed with its mesh unless it is `shared`: the same material for every patch,
+// disposed by dispose()); those are drawn at their own shape unless you pass them
+// through `morphMaterial` yourself.
 
 import * as THREE from 'three';
 import { Stream } from './tessera_web.js';
@@ -54,6 +66,79 @@ const _u = new THREE.Vector3();
 const _size = new THREE.Vector2();
 const _inv = new THREE.Matrix4();
 
+// The morph, patched into three.js's own chunks (r187 names; the injected lines are
+// written against `position`, `normal`, `color` and `uv` as three.js declares them).
+const MORPH_VERTEX = {
+  '#include <common>': `#include <common>
+attribute vec3 tesseraTarget;
+attribute vec3 tesseraTargetNormal;
+uniform float tesseraRatio;
+#ifdef USE_COLOR
+attribute vec3 tesseraTargetColor;
+#endif
+#ifdef USE_MAP
+attribute vec2 tesseraTargetUv;
+#endif`,
+  // a + (b - a) * r, as the native shader: a vertex whose target is itself stays
+  // bit-exact at every ratio, so neighbours morphing at different ratios meet there.
+  '#include <begin_vertex>': 'vec3 transformed = position + (tesseraTarget - position) * tesseraRatio;',
+  '#include <beginnormal_vertex>': 'vec3 objectNormal = normal + (tesseraTargetNormal - normal) * tesseraRatio;',
+  '#include <color_vertex>': `#include <color_vertex>
+#if defined( USE_COLOR ) && !defined( USE_COLOR_ALPHA )
+  vColor.rgb = color + (tesseraTargetColor - color) * tesseraRatio;
+#endif`,
+  '#include <uv_vertex>': `#include <uv_vertex>
+#ifdef USE_MAP
+  vMapUv = ( mapTransform * vec3( uv + (tesseraTargetUv - uv) * tesseraRatio, 1 ) ).xy;
+#endif`,
+};
+// The texture sampled no finer than mip level `tesseraMinLod` (ratio x the levels
+// between the patch's texels and its parent's): the derivatives scaled up to it, as
+// crates/render/src/patch.wgsl's fs_textured; at 0 exactly three.js's own sampling.
+const MORPH_FRAGMENT = {
+  '#include <common>': `#include <common>
+uniform float tesseraMinLod;`,
+  '#include <map_fragment>': `#ifdef USE_MAP
+  vec2 tesseraDx = dFdx( vMapUv );
+  vec2 tesseraDy = dFdy( vMapUv );
+  vec2 tesseraSize = vec2( textureSize( map, 0 ) );
+  float tesseraRho = max( length( tesseraDx * tesseraSize ), length( tesseraDy * tesseraSize ) );
+  float tesseraFloor = exp2( tesseraMinLod );
+  float tesseraK = ( tesseraMinLod > 0.0 && tesseraRho < tesseraFloor ) ? tesseraFloor / max( tesseraRho, 1e-8 ) : 1.0;
+  vec4 sampledDiffuseColor = textureGrad( map, vMapUv, tesseraDx * tesseraK, tesseraDy * tesseraK );
+  diffuseColor *= sampledDiffuseColor;
+#endif`,
+};
+
+function patchChunks(source, chunks) {
+  for (const [from, to] of Object.entries(chunks)) {
+    if (!source.includes(from)) throw new Error(`tessera-three: three.js shader chunk ${from} not found (three.js version?)`);
+    source = source.replace(from, to);
+  }
+  return source;
+}
+
+/**
+ * Makes `material` (a three.js built-in material using three's standard shader chunks,
+ * e.g. MeshStandardMaterial) draw a Tessera patch morphed: its vertices blended toward
+ * the mesh's `tesseraTarget*` attributes by `material.userData.tesseraRatio.value`.
+ * Returns the material. Every material made so shares one shader program per kind.
+ */
+export function morphMaterial(material) {
+  const ratio = { value: 0 };
+  const minLod = { value: 0 };
+  material.userData.tesseraRatio = ratio;
+  material.userData.tesseraMinLod = minLod;
+  material.onBeforeCompile = (shader) => {
+    shader.uniforms.tesseraRatio = ratio;
+    shader.uniforms.tesseraMinLod = minLod;
+    shader.vertexShader = patchChunks(shader.vertexShader, MORPH_VERTEX);
+    shader.fragmentShader = patchChunks(shader.fragmentShader, MORPH_FRAGMENT);
+  };
+  material.customProgramCacheKey = () => 'tessera-morph-1';
+  return material;
+}
+
 /** A streamed Tessera model: a THREE.Group of the patches drawn. See the top of the file. */
 export class TesseraModel extends THREE.Group {
   #stream;
@@ -61,6 +146,7 @@ export class TesseraModel extends THREE.Group {
   #content = new THREE.Group();
   #meshes = new Map();
   #shared = null;
+  #sharedParams = null;
   #makeMaterial;
   #stats = null;
   #idleFrames = 0;
@@ -80,13 +166,14 @@ export class TesseraModel extends THREE.Group {
    * patch textures are handed over from their first mip that fits; pass
    * renderer.capabilities.maxTextureSize), material (see the top of the file),
    * keepArrays (default true; false drops each mesh's vertex and texel arrays from the
-   * JS heap once WebGL has them: half the memory, but no raycasting on the meshes).
+   * JS heap once WebGL has them: half the memory, but no raycasting on the meshes),
+   * morph (default true: geomorphing; see the top of the file).
    */
-  static async load(url, { tolerancePx = 1, memoryBytes = 512 * 1048576, workers = defaultWorkers(), prefixBytes = 65536, maxTextureDim = 4096, material = null, keepArrays = true } = {}) {
+  static async load(url, { tolerancePx = 1, memoryBytes = 512 * 1048576, workers = defaultWorkers(), prefixBytes = 65536, maxTextureDim = 4096, material = null, keepArrays = true, morph = true } = {}) {
     if (!url) throw new Error('TesseraModel.load: no model URL given');
     await loadWasm();
     const abs = new URL(url, typeof document !== 'undefined' ? document.baseURI : undefined).href;
-    const stream = await Stream.open(abs, JSON.stringify({ tolerancePx, memoryBytes, prefixBytes, maxTextureDim }));
+    const stream = await Stream.open(abs, JSON.stringify({ tolerancePx, memoryBytes, prefixBytes, maxTextureDim, morph }));
     const pool = acquirePool(workers);
     if (pool) stream.set_decoder((job) => pool.decode(job), pool.size);
     return new TesseraModel(stream, pool, material, keepArrays);
@@ -142,6 +229,11 @@ export class TesseraModel extends THREE.Group {
    */
   setMemoryBytes(bytes) {
     this.#stream.set_memory_bytes(bytes);
+  }
+
+  /** Turns geomorphing on or off (from the next update()). */
+  setMorph(enabled) {
+    this.#stream.set_morph(!!enabled);
   }
 
   /**
@@ -213,8 +305,17 @@ export class TesseraModel extends THREE.Group {
       const patch = this.#stream.take_patch(node);
       if (patch) this.#make(node, patch);
     }
-    const draw = new Set(this.#stream.draw());
-    for (const [node, mesh] of this.#meshes) mesh.visible = draw.has(node);
+    const drawn = this.#stream.draw();
+    const ratios = this.#stream.ratios();
+    for (const mesh of this.#meshes.values()) mesh.visible = false;
+    let morphing = 0;
+    for (let k = 0; k < drawn.length; k++) {
+      const mesh = this.#meshes.get(drawn[k]);
+      if (!mesh) continue;
+      mesh.visible = true;
+      if (this.#setRatio(mesh, mesh.userData.morphs ? ratios[k] : 0)) morphing++;
+    }
+    stats.morphing_meshes = morphing;
     stats.meshes = this.#meshes.size;
     this.#stats = stats;
     this.#idleFrames = stats.idle ? this.#idleFrames + 1 : 0;
@@ -227,10 +328,33 @@ export class TesseraModel extends THREE.Group {
     return stats;
   }
 
+  // Draws `mesh` at morph ratio `r`; returns whether it morphs.
+  #setRatio(mesh, r) {
+    const u = mesh.userData;
+    u.ratio = r;
+    if (u.ownMaterial || u.custom) {
+      const m = mesh.material.userData;
+      if (m.tesseraRatio) {
+        m.tesseraRatio.value = r;
+        m.tesseraMinLod.value = r * (u.texelLod || 0);
+      }
+      return r > 0 && !!m.tesseraRatio;
+    }
+    // The shared material at rest; a morphing copy of it (made once) while r > 0.
+    if (r > 0) {
+      if (!u.morphMaterial) u.morphMaterial = morphMaterial(new THREE.MeshStandardMaterial(this.#sharedParams));
+      u.morphMaterial.userData.tesseraRatio.value = r;
+      mesh.material = u.morphMaterial;
+      return true;
+    }
+    mesh.material = this.#shared;
+    return false;
+  }
+
   #material(patch) {
     if (this.#makeMaterial) {
       const m = this.#makeMaterial(patch);
-      return { material: m, own: !m.userData.shared };
+      return { material: m, own: !m.userData.shared, custom: true };
     }
     if (patch.texture) {
       const t = new THREE.DataTexture(patch.texture, patch.width, patch.height, THREE.RGBAFormat, THREE.UnsignedByteType);
@@ -247,11 +371,12 @@ export class TesseraModel extends THREE.Group {
           t.image.data = null;
         };
       }
-      return { material: new THREE.MeshStandardMaterial({ map: t, roughness: 0.85, metalness: 0 }), own: true };
+      return { material: morphMaterial(new THREE.MeshStandardMaterial({ map: t, roughness: 0.85, metalness: 0 })), own: true };
     }
     if (!this.#shared) {
       const colors = patch.colors.length > 0;
-      this.#shared = new THREE.MeshStandardMaterial({ color: colors ? 0xffffff : CLAY, vertexColors: colors, roughness: 0.85, metalness: 0 });
+      this.#sharedParams = { color: colors ? 0xffffff : CLAY, vertexColors: colors, roughness: 0.85, metalness: 0 };
+      this.#shared = new THREE.MeshStandardMaterial(this.#sharedParams);
     }
     return { material: this.#shared, own: false };
   }
@@ -264,6 +389,16 @@ export class TesseraModel extends THREE.Group {
     if (patch.uvs.length) g.setAttribute('uv', new THREE.BufferAttribute(patch.uvs, 2));
     g.setIndex(new THREE.BufferAttribute(patch.indices, 1));
     if (!patch.normals.length) g.computeVertexNormals();
+    // The morph targets (a patch with moving vertices; see the top of the file). A
+    // model without normals morphs the normals three.js computed.
+    const morphs = patch.targets && patch.targets.length === patch.positions.length;
+    if (morphs) {
+      g.setAttribute('tesseraTarget', new THREE.BufferAttribute(patch.targets, 3));
+      const tn = patch.targetNormals.length === patch.positions.length ? patch.targetNormals : g.attributes.normal.array;
+      g.setAttribute('tesseraTargetNormal', new THREE.BufferAttribute(tn, 3));
+      if (patch.colors.length) g.setAttribute('tesseraTargetColor', new THREE.BufferAttribute(patch.targetColors.length ? patch.targetColors : patch.colors, 3));
+      if (patch.uvs.length) g.setAttribute('tesseraTargetUv', new THREE.BufferAttribute(patch.targetUvs.length ? patch.targetUvs : patch.uvs, 2));
+    }
     g.computeBoundingSphere();
     if (!this.#keepArrays) {
       const drop = function () {
@@ -272,12 +407,16 @@ export class TesseraModel extends THREE.Group {
       for (const a of Object.values(g.attributes)) a.onUpload(drop);
       g.index.onUpload(drop);
     }
-    const { material, own } = this.#material(patch);
+    const { material, own, custom = false } = this.#material(patch);
     const mesh = new THREE.Mesh(g, material);
     mesh.name = `tessera node ${node}`;
     mesh.userData.node = node;
     mesh.userData.level = patch.level;
     mesh.userData.ownMaterial = own;
+    mesh.userData.custom = custom;
+    mesh.userData.morphs = morphs;
+    mesh.userData.texelLod = patch.texelLod || 0;
+    mesh.userData.ratio = 0;
     mesh.visible = false;
     mesh.matrixAutoUpdate = false;
     this.#content.add(mesh);
@@ -290,6 +429,7 @@ export class TesseraModel extends THREE.Group {
     this.#meshes.delete(node);
     this.#content.remove(mesh);
     mesh.geometry.dispose();
+    if (mesh.userData.morphMaterial) mesh.userData.morphMaterial.dispose();
     if (mesh.userData.ownMaterial) {
       if (mesh.material.map) mesh.material.map.dispose();
       mesh.material.dispose();

@@ -615,11 +615,13 @@ export const Tessera = {
    * shared by every view on the page; 0 decodes on the main thread, at most 6 ms a
    * frame), cancelRequests (default true: a range request none of whose patches the
    * view has wanted for 4 frames is aborted, so a turned camera does not wait behind
-   * the bytes of the view it left; false lets every request finish).
+   * the bytes of the view it left; false lets every request finish), morph (default
+   * true: geomorphing, a refinement blends in from its parent's shape; false draws
+   * every patch at its own, so refinements pop).
    */
   async view(
     canvas,
-    { url, tolerancePx = 1, memoryBytes = 512 * 1048576, camera = null, autoResize = true, prefixBytes = 65536, maxTextureDim = null, workers = defaultWorkers(), cancelRequests = true } = {},
+    { url, tolerancePx = 1, memoryBytes = 512 * 1048576, camera = null, autoResize = true, prefixBytes = 65536, maxTextureDim = null, workers = defaultWorkers(), cancelRequests = true, morph = true } = {},
   ) {
     if (!url) throw new Error('Tessera.view: no model URL given');
     if (!hasWebGL2()) {
@@ -640,6 +642,7 @@ export const Tessera = {
       prefixBytes,
       maxTextureDim,
       cancelRequests,
+      morph,
       camera: camera == null ? null : typeof camera === 'string' ? JSON.parse(camera) : camera,
     });
     const viewer = await Viewer.open(canvas, abs, options);

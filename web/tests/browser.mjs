@@ -54,7 +54,9 @@
 // {"model", "size": [w, h], "memory_bytes", "count", "camera"} on web/tests/blank.html:
 // `count` views of the model on canvases of that size, each opened with memoryBytes,
 // waited until all are idle: their stats ("open"); then all but the last disposed and
-// the last waited until it has run a frame and is idle again: its stats ("alone")).
+// the last waited until it has run a frame and is idle again: its stats ("alone")),
+// "morph" (with "morph": {"shot": PATH, "held_shot": PATH (optional)} on
+// web/three.html, with ?clock=hold for held_shot: see the code; "held" and "idle").
 // Exit 0 when every visit ran (whatever its outcome), 2 on a driver failure.
 
 import { readFileSync, writeFileSync } from 'node:fs';
@@ -141,8 +143,39 @@ for (const visit of plan.visits) {
   page.on('pageerror', (e) => consoleLines.push(`pageerror: ${e.message}`));
   const t0 = Date.now();
   let outcome = 'timeout';
+  let morph = null;
   try {
     await page.goto(visit.url, { waitUntil: 'load', timeout: visit.timeout_ms || 60000 });
+    // "morph" with "held_shot" (web/three.html?clock=hold): once the patches stop
+    // coming with the clock held (nothing pending, a cut past the roots, the same for
+    // 1 s), the model alone to held_shot and the stats ("held"); then the clock let go.
+    if (visit.morph && visit.morph.held_shot) {
+      const quiet = async () => {
+        const h = await page.waitForFunction(
+          () => {
+            const s = window.tesseraError ? null : window.tesseraStats;
+            return s && s.pending === 0 && s.triangles > s.first_triangles ? JSON.stringify([s.triangles, s.nodes, s.requests, s.bytes_received]) : false;
+          },
+          null,
+          { timeout: visit.timeout_ms || 60000, polling: 50 },
+        );
+        return h.jsonValue();
+      };
+      let key = await quiet();
+      for (let k = 0; k < 30; k++) {
+        await page.waitForTimeout(1000);
+        const next = await quiet();
+        if (next === key) break;
+        key = next;
+      }
+      await page.evaluate(() => window.tesseraThree.modelOnly(true));
+      await page.locator('#view').screenshot({ path: visit.morph.held_shot });
+      morph = { held: await page.evaluate(() => window.tesseraStats) };
+      await page.evaluate(() => {
+        window.tesseraThree.modelOnly(false);
+        window.tesseraThree.release();
+      });
+    }
     // A page of cycles runs nothing until the driver does; one to drop the connection
     // of waits only for the first frame drawn.
     const handle = visit.cycles || visit.shared
@@ -599,10 +632,20 @@ for (const visit of plan.visits) {
       consoleLines.push(`driver: three: ${e.message.split('\n')[0]}`);
     }
   }
+  // "morph" (web/three.html) once idle: the model alone to "shot", the stats ("idle").
+  if (visit.morph && outcome === 'idle') {
+    try {
+      await page.evaluate(() => window.tesseraThree.modelOnly(true));
+      await page.locator('#view').screenshot({ path: visit.morph.shot });
+      morph = { ...morph, idle: await page.evaluate(() => window.tesseraStats) };
+    } catch (e) {
+      consoleLines.push(`driver: morph: ${e.message.split('\n')[0]}`);
+    }
+  }
   if (visit.screenshot && outcome === visit.expect && !visit.drop && !visit.three) {
     await page.locator('#view').screenshot({ path: visit.screenshot });
   }
-  results.push({ name: visit.name, outcome, ms, ...state, interaction, shot, touch, pick, measure, cycles, drop, three, jumps, shared, console: consoleLines });
+  results.push({ name: visit.name, outcome, ms, ...state, interaction, shot, touch, pick, measure, cycles, drop, three, jumps, shared, morph, console: consoleLines });
   await context.close();
 }
 await browser.close();

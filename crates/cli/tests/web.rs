@@ -2199,3 +2199,111 @@ fn the_three_js_adapter_streams_the_model_into_a_three_scene() {
         "{d}"
     );
 }
+
+/// PSNR the three.js page's model must keep, with its clock held (every patch that
+/// arrives stays at its parent's shape), against the same page drawing only the cut it
+/// started from (a tolerance so large that nothing refines). See the test for what was
+/// measured.
+const MIN_HELD_PSNR_DB: f64 = 48.0;
+
+/// Geomorphing in the three.js adapter (issue 13): a patch that refines its parent
+/// comes in at the parent's shape (and, textured, at its texel detail) and blends to its
+/// own, so nothing pops. With the page's clock held (`?clock=hold`), the children that
+/// arrive stay at their parent's shape: the image must stay that of the cut they
+/// replace while the triangles grow; the negative control (`morph=0`) shows the new
+/// detail at once. Then the clock runs, the blends end and the view converges to the
+/// same cut as without morphing. The Bunny (vertex normals) and the textured scissors
+/// (texture coordinates and the texel floor), each from the page's home view.
+#[test]
+fn the_three_js_adapter_geomorphs_so_refinements_do_not_pop() {
+    let web = dist();
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let (models, _) = build_bunny(dir);
+    let obj = repo().join("../shared/data/ycb-scissors/textured_simple_reoriented.obj");
+    let scissors = models.join("scissors.tsr");
+    let (code, _, stderr) = run_tessera(args!["build", obj, "-o", scissors, "--quiet"]);
+    assert_eq!(code, 0, "{stderr}");
+    let (_server, addr) = serve(&models, &web);
+    let mut visits = Vec::new();
+    for (model, query) in [("bunny", "&up=%2By"), ("scissors", "")] {
+        let base = format!("http://{addr}/three.html?model=/models/{model}.tsr{query}");
+        for (name, q, held) in [
+            ("held", "&clock=hold", true),
+            ("unmorphed", "&clock=hold&morph=0", true),
+            ("start", "&tolerancePx=1000000", false),
+        ] {
+            let shot = |k: &str| dir.join(format!("{model}-{name}-{k}.png"));
+            let mut m = json!({"shot": shot("idle")});
+            if held {
+                m["held_shot"] = json!(shot("held"));
+            }
+            visits.push(
+                json!({"name": format!("{model}-{name}"), "url": format!("{base}{q}"),
+                "expect": "idle", "timeout_ms": 120000, "viewport": [WIDTH, HEIGHT], "morph": m}),
+            );
+        }
+    }
+    let results = browse_alone(Value::Array(visits), &[], dir);
+    let keep = std::env::var_os("TESSERA_KEEP_SHOTS").map(PathBuf::from);
+    for model in ["bunny", "scissors"] {
+        let png = |name: &str, k: &str| {
+            let p = dir.join(format!("{model}-{name}-{k}.png"));
+            if let Some(k) = &keep {
+                std::fs::create_dir_all(k).unwrap();
+                let _ = std::fs::copy(&p, k.join(p.file_name().unwrap()));
+            }
+            Image::load_png(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+        };
+        let stats = |name: &str, k: &str| {
+            let r = result(&results, &format!("{model}-{name}"));
+            assert_eq!(r["outcome"], "idle", "{model}-{name}: {r:#}");
+            r["morph"][k].clone()
+        };
+        let (held, unmorphed, start) = (
+            stats("held", "held"),
+            stats("unmorphed", "held"),
+            stats("start", "idle"),
+        );
+        let (idle, idle_unmorphed) = (stats("held", "idle"), stats("unmorphed", "idle"));
+        let start_img = png("start", "idle");
+        let db = |a: &Image| psnr(a, &start_img).unwrap_or(f64::INFINITY);
+        let (p_held, p_unmorphed, p_idle) = (
+            db(&png("held", "held")),
+            db(&png("unmorphed", "held")),
+            db(&png("held", "idle")),
+        );
+        let tri = |s: &Value| s["triangles"].as_u64().unwrap();
+        eprintln!(
+            "three morph {model}: start {} triangles ({} nodes); clock held: {} triangles ({} nodes, {} morphing), {p_held:.2} dB against the start; unmorphed: {} triangles, {p_unmorphed:.2} dB; converged: {} triangles ({} nodes, {} still morphing by the view), {p_idle:.2} dB; unmorphed converged: {} triangles ({} nodes)",
+            tri(&start), start["nodes"], tri(&held), held["nodes"], held["morphing_meshes"],
+            tri(&unmorphed), tri(&idle), idle["nodes"], idle["morphing_meshes"],
+            tri(&idle_unmorphed), idle_unmorphed["nodes"]
+        );
+        // The start cut was refined while the clock was held, and every refined patch
+        // drawn blends: the picture stayed the start's.
+        assert!(tri(&held) > tri(&start), "{model}: {held} / {start}");
+        assert!(held["morphing_meshes"].as_u64().unwrap() > 0, "{held}");
+        assert!(
+            p_held >= MIN_HELD_PSNR_DB,
+            "{model}: held {p_held:.2} dB < {MIN_HELD_PSNR_DB}"
+        );
+        // The control: the same arrivals without morphing change the picture.
+        assert_eq!(unmorphed["morphing_meshes"], 0, "{unmorphed}");
+        assert!(tri(&unmorphed) > tri(&start), "{unmorphed}");
+        assert!(
+            p_unmorphed < MIN_HELD_PSNR_DB - 3.0,
+            "{model}: unmorphed {p_unmorphed:.2} dB"
+        );
+        // Released, the blends end: the cut without morphing, and its detail.
+        assert_eq!(
+            idle["nodes"], idle_unmorphed["nodes"],
+            "{idle} / {idle_unmorphed}"
+        );
+        assert_eq!(tri(&idle), tri(&idle_unmorphed));
+        assert!(
+            p_idle < MIN_HELD_PSNR_DB - 3.0,
+            "{model}: converged {p_idle:.2} dB"
+        );
+    }
+}

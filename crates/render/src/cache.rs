@@ -130,15 +130,121 @@ pub fn gpu_vertices(
     gpu_vertices_as(p, siblings, quant_step, patch_is_textured(p), out);
 }
 
+/// A vertex's morph target: the surviving vertex of the parent's simplification it
+/// moves onto ([`morph_targets`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MorphTarget<'a> {
+    /// The target position (quantised, as the patch's positions).
+    pub position: [u32; 3],
+    /// The vertex lending the target its normal and colour: the first vertex at the
+    /// target position in the patch, else in one of the siblings. None: found nowhere
+    /// (the vertex keeps its own attributes while it moves).
+    pub donor: Option<(&'a PatchData, usize)>,
+    /// Textured: the source uv of the survivor at the target position whose chart shows
+    /// the same source image as the vertex's own chart, the nearest to the vertex's own
+    /// source uv among them (a seam splits a survivor into several vertices, one per
+    /// side), to be mapped through the vertex's OWN chart (the builder sized each chart to
+    /// hold its vertices' targets). None: no such survivor (the target keeps the
+    /// vertex's own uv).
+    pub uv: Option<[f32; 2]>,
+}
+
+/// The source uv of vertex `i` of `p` (0, 0 when the patch has none).
+fn source_uv(p: &PatchData, i: usize) -> [f32; 2] {
+    match p.uvs.get(i) {
+        Some(&uv) if p.uvs.len() == p.positions.len() => uv,
+        _ => [0.0, 0.0],
+    }
+}
+
+/// The chart of vertex `i` of `p`, if it has one.
+fn vertex_chart(p: &PatchData, i: usize) -> Option<&TextureChart> {
+    if p.chart_ids.len() != p.positions.len() {
+        return None;
+    }
+    p.charts.get(usize::from(p.chart_ids[i]))
+}
+
+/// The morph target of every vertex of `p` (see `tessera_select::morph`), its
+/// attributes looked up in `p` and its `siblings` (the other patches of its residency
+/// group: about 8% of the moving vertices of the Bunny and the Dragon move onto a
+/// survivor of a sibling); one hash lookup per moving vertex. None for a vertex whose
+/// target is itself (survivors, locked borders); an empty list when no vertex of `p`
+/// moves. `textured` also looks up the target's uv ([`MorphTarget::uv`]). Shared by the
+/// GPU cache ([`gpu_vertices_as`]) and the browser's three.js adapter, so both morph
+/// the same way.
+pub fn morph_targets<'a>(
+    p: &'a PatchData,
+    siblings: &[&'a PatchData],
+    textured: bool,
+) -> Vec<Option<MorphTarget<'a>>> {
+    let morphs = p.morph_targets.len() == p.positions.len()
+        && p.morph_targets
+            .iter()
+            .zip(&p.positions)
+            .any(|(t, q)| t != q);
+    if !morphs {
+        return Vec::new();
+    }
+    let sources: Vec<&PatchData> = std::iter::once(p).chain(siblings.iter().copied()).collect();
+    // Where each position is: this patch first (source 0), then the siblings. Every
+    // vertex at a position, in that order, as a list (head in `at`, links in
+    // `entries`: (source, vertex, next entry or u32::MAX)), built back to front.
+    let mut at: FxHashMap<[u32; 3], u32> = FxHashMap::default();
+    let mut entries: Vec<(u32, u32, u32)> = Vec::new();
+    for (k, s) in sources.iter().enumerate().rev() {
+        for (i, q) in s.positions.iter().enumerate().rev() {
+            let e = entries.len() as u32;
+            let next = at.insert(*q, e).unwrap_or(u32::MAX);
+            entries.push((k as u32, i as u32, next));
+        }
+    }
+    p.positions
+        .iter()
+        .zip(&p.morph_targets)
+        .enumerate()
+        .map(|(i, (q, t))| {
+            if t == q {
+                return None;
+            }
+            let mut target = MorphTarget {
+                position: *t,
+                donor: None,
+                uv: None,
+            };
+            let Some(&head) = at.get(t) else {
+                return Some(target);
+            };
+            let (k, j, _) = entries[head as usize];
+            target.donor = Some((sources[k as usize], j as usize));
+            if let (true, Some(own)) = (textured, vertex_chart(p, i)) {
+                let own_uv = source_uv(p, i);
+                let mut best: Option<(f32, [f32; 2])> = None;
+                let mut e = head;
+                while e != u32::MAX {
+                    let (k, j, next) = entries[e as usize];
+                    let s = sources[k as usize];
+                    if vertex_chart(s, j as usize).is_some_and(|c| c.image == own.image) {
+                        let u = source_uv(s, j as usize);
+                        let d = (u[0] - own_uv[0]).powi(2) + (u[1] - own_uv[1]).powi(2);
+                        if best.is_none_or(|(bd, _)| d < bd) {
+                            best = Some((d, u));
+                        }
+                    }
+                    e = next;
+                }
+                target.uv = best.map(|(_, u)| u);
+            }
+            Some(target)
+        })
+        .collect()
+}
+
 /// [`gpu_vertices`], textured or not as told. Textured: the colour slots hold the
 /// vertex's coordinate in the patch texture, `charts[chart_ids[i]].map(uvs[i])`, and its
-/// target's, as [`uv_unorm16`] (no chart: the source uv as it is). The target's uv comes
-/// from a survivor at the target position (patch first, then `siblings`) whose chart
-/// shows the same source image as the vertex's own chart, the one with the nearest
-/// source uv among them (a seam splits a survivor into several vertices, one per side),
-/// mapped through the vertex's OWN chart (the builder sized each chart to hold its
-/// vertices' targets). No such survivor: the target keeps the vertex's own uv. Its
-/// normal follows the untextured rule (the first vertex at the position).
+/// target's, as [`uv_unorm16`] (no chart: the source uv as it is); the target's uv is
+/// [`MorphTarget::uv`] mapped through the vertex's own chart. Normals follow the
+/// untextured rule ([`MorphTarget::donor`]).
 pub fn gpu_vertices_as(
     p: &PatchData,
     siblings: &[&PatchData],
@@ -160,47 +266,16 @@ pub fn gpu_vertices_as(
         _ => [0, 0],
     };
     let color = |p: &PatchData, i: usize| p.colors.get(i).copied().unwrap_or([255; 4]);
-    // Textured: the source uv and the chart of vertex `i` of `p`.
-    let uv = |p: &PatchData, i: usize| match p.uvs.get(i) {
-        Some(&uv) if p.uvs.len() == p.positions.len() => uv,
-        _ => [0.0, 0.0],
-    };
-    fn chart(p: &PatchData, i: usize) -> Option<&TextureChart> {
-        if p.chart_ids.len() != p.positions.len() {
-            return None;
-        }
-        p.charts.get(usize::from(p.chart_ids[i]))
-    }
-    let morphs = p.morph_targets.len() == p.positions.len()
-        && p.morph_targets
-            .iter()
-            .zip(&p.positions)
-            .any(|(t, q)| t != q);
-    let sources: Vec<&PatchData> = std::iter::once(p).chain(siblings.iter().copied()).collect();
-    // Where each position is: this patch first (source 0), then the siblings. Every
-    // vertex at a position, in that order, as a list (head in `at`, links in
-    // `entries`: (source, vertex, next entry or u32::MAX)), built back to front.
-    let mut at: FxHashMap<[u32; 3], u32> = FxHashMap::default();
-    let mut entries: Vec<(u32, u32, u32)> = Vec::new();
-    if morphs {
-        for (k, s) in sources.iter().enumerate().rev() {
-            for (i, q) in s.positions.iter().enumerate().rev() {
-                let e = entries.len() as u32;
-                let next = at.insert(*q, e).unwrap_or(u32::MAX);
-                entries.push((k as u32, i as u32, next));
-            }
-        }
-    }
+    let targets = morph_targets(p, siblings, textured);
     for (i, q) in p.positions.iter().enumerate() {
         let position = local(q);
         let n = normal(p, i);
-        let (c, own_chart, own_uv) = if textured {
-            let uv = uv(p, i);
-            let ch = chart(p, i);
-            let t = ch.map_or(uv, |ch| ch.map(uv));
-            (uv_unorm16(t), ch, uv)
+        let (c, own_chart) = if textured {
+            let ch = vertex_chart(p, i);
+            let uv = source_uv(p, i);
+            (uv_unorm16(ch.map_or(uv, |ch| ch.map(uv))), ch)
         } else {
-            (color(p, i), None, [0.0; 2])
+            (color(p, i), None)
         };
         let mut v = GpuVertex {
             position,
@@ -210,34 +285,14 @@ pub fn gpu_vertices_as(
             color: c,
             target_color: c,
         };
-        if morphs && p.morph_targets[i] != *q {
-            let t = &p.morph_targets[i];
-            v.target = local(t);
-            if let Some(&head) = at.get(t) {
-                let (k, j, _) = entries[head as usize];
-                let s = sources[k as usize];
-                v.target_normal = normal(s, j as usize);
+        if let Some(Some(t)) = targets.get(i) {
+            v.target = local(&t.position);
+            if let Some((s, j)) = t.donor {
+                v.target_normal = normal(s, j);
                 if !textured {
-                    v.target_color = color(s, j as usize);
-                } else if let Some(own) = own_chart {
-                    // The nearest source uv among the survivors on the same image.
-                    let mut best: Option<(f32, [f32; 2])> = None;
-                    let mut e = head;
-                    while e != u32::MAX {
-                        let (k, j, next) = entries[e as usize];
-                        let s = sources[k as usize];
-                        if chart(s, j as usize).is_some_and(|c| c.image == own.image) {
-                            let u = uv(s, j as usize);
-                            let d = (u[0] - own_uv[0]).powi(2) + (u[1] - own_uv[1]).powi(2);
-                            if best.is_none_or(|(bd, _)| d < bd) {
-                                best = Some((d, u));
-                            }
-                        }
-                        e = next;
-                    }
-                    if let Some((_, u)) = best {
-                        v.target_color = uv_unorm16(own.map(u));
-                    }
+                    v.target_color = color(s, j);
+                } else if let (Some(own), Some(u)) = (own_chart, t.uv) {
+                    v.target_color = uv_unorm16(own.map(u));
                 }
             }
         }
@@ -666,10 +721,8 @@ impl GpuCache {
             .collect();
     }
 
-    /// The texel detail a textured patch of `texel_size` morphs from: mip levels
-    /// between it and its parent's texels (the parent's slot's when resident, else the
-    /// texel its error allows: the builder's coarsest texel at most the error, a level
-    /// of which lies between half the error and the error).
+    /// The texel detail a textured patch of `texel_size` morphs from ([`texel_lod`]):
+    /// its parent's slot's texel when resident, else the one its error allows.
     fn texel_lod(&self, model: u32, node: u32, texel_size: f32) -> f32 {
         let Some(&(parent, error)) = self
             .parents
@@ -678,21 +731,14 @@ impl GpuCache {
         else {
             return 0.0;
         };
-        if parent == tessera_format::NO_NODE || texel_size <= 0.0 {
+        if parent == tessera_format::NO_NODE {
             return 0.0;
         }
         let parent_texel = self
             .slots
             .get(&slot_key(model, parent))
-            .map(|s| s.texel_size)
-            .filter(|&t| t > 0.0)
-            .unwrap_or(error * std::f32::consts::FRAC_1_SQRT_2);
-        let l = (parent_texel / texel_size).log2();
-        if l.is_finite() {
-            l.clamp(0.0, 8.0)
-        } else {
-            0.0
-        }
+            .map_or(0.0, |s| s.texel_size);
+        texel_lod(texel_size, parent_texel, error)
     }
 
     pub fn set_levels(&mut self, model: u32, levels: Vec<u8>) {
@@ -961,6 +1007,29 @@ impl GpuCache {
     }
 }
 
+/// Mip levels between a patch's texels (`texel_size`, model space) and its parent's
+/// (`parent_texel`, 0 when unknown: then the texel the parent's `parent_error` allows,
+/// the builder's coarsest texel at most the error, a level of which lies between half
+/// the error and the error): `log2(parent / own)`, 0..8, 0 when unknown. Drawn at morph
+/// ratio `r`, a textured patch samples no finer than level `r * texel_lod`
+/// ([`Slot::texel_lod`]; the three.js adapter's shader does the same).
+pub fn texel_lod(texel_size: f32, parent_texel: f32, parent_error: f32) -> f32 {
+    if texel_size <= 0.0 {
+        return 0.0;
+    }
+    let parent = if parent_texel > 0.0 {
+        parent_texel
+    } else {
+        parent_error * std::f32::consts::FRAC_1_SQRT_2
+    };
+    let l = (parent / texel_size).log2();
+    if l.is_finite() {
+        l.clamp(0.0, 8.0)
+    } else {
+        0.0
+    }
+}
+
 /// The model-space size of a texel of `patch`'s `width` x `height` texture: the square
 /// root of the model area over the texel area of its textured triangles (each vertex's
 /// uv mapped through its chart); 0 without such triangles.
@@ -1086,6 +1155,21 @@ mod tests {
         );
         let l = (x * x + y * y + z * z).sqrt();
         [x / l, y / l, z / l]
+    }
+
+    #[test]
+    fn texel_lod_is_the_levels_to_the_parents_texels() {
+        // The parent's texel known: log2 of the ratio, clamped to 0..8.
+        assert_eq!(texel_lod(0.25, 1.0, 9.0), 2.0);
+        assert_eq!(texel_lod(1.0, 0.5, 9.0), 0.0);
+        assert_eq!(texel_lod(1.0, 1024.0, 9.0), 8.0);
+        // Unknown: the texel the parent's error allows (error / sqrt 2).
+        let l = texel_lod(0.5, 0.0, 2.0 * std::f32::consts::SQRT_2);
+        assert!((l - 2.0).abs() < 1e-5, "{l}");
+        // No texels of its own, or nothing known: 0.
+        assert_eq!(texel_lod(0.0, 1.0, 1.0), 0.0);
+        assert_eq!(texel_lod(1.0, 0.0, 0.0), 0.0);
+        assert_eq!(texel_lod(f32::NAN, 1.0, 1.0), 0.0);
     }
 
     #[test]

@@ -29,8 +29,8 @@ mod texture;
 mod viewer;
 
 pub use cache::{
-    gpu_vertices, gpu_vertices_as, patch_is_textured, patch_texel_size, uv_unorm16, GpuCache,
-    GpuCacheStats, GpuStore, GpuVertex, Slot,
+    gpu_vertices, gpu_vertices_as, morph_targets, patch_is_textured, patch_texel_size, texel_lod,
+    uv_unorm16, GpuCache, GpuCacheStats, GpuStore, GpuVertex, MorphTarget, Slot,
 };
 pub use gpu::Gpu;
 pub use renderer::{

@@ -7,8 +7,10 @@
 //! linear vertex colours, texture coordinates mapped into the patch texture, u32
 //! indices, the texture's RGBA8) until the page takes them, and records what was
 //! added and evicted; each frame the page builds and disposes its meshes from that and
-//! shows the scheduler's draw list. Geomorphing is not done (the meshes are drawn at
-//! their own level, as the scheduler's ratios are not applied).
+//! shows the scheduler's draw list with its morph ratios. Geomorphing as the canvas
+//! viewer: each vertex's morph target and its attributes ([`tessera_render::morph_targets`],
+//! the GPU cache's own lookup) go with the arrays, and the page's shader blends each
+//! mesh toward them by its node's ratio ([`Stream::ratios`]).
 
 use std::sync::Arc;
 
@@ -27,9 +29,15 @@ use crate::viewer::{
 
 /// Bytes a vertex takes as the adapter's attributes: position and normal (f32 x 3
 /// each), plus a linear colour (f32 x 3, untextured models with colours) or a texture
-/// coordinate (f32 x 2, textured models).
-fn vertex_bytes(colors: bool, textured: bool) -> u64 {
-    24 + if colors { 12 } else { 0 } + if textured { 8 } else { 0 }
+/// coordinate (f32 x 2, textured models); twice that with its morph target's (a patch
+/// with moving vertices: all but the roots, nearly).
+fn vertex_bytes(colors: bool, textured: bool, morphs: bool) -> u64 {
+    let own = 24 + if colors { 12 } else { 0 } + if textured { 8 } else { 0 };
+    if morphs {
+        own * 2
+    } else {
+        own
+    }
 }
 
 /// An sRGB-encoded 8-bit channel as linear light (three.js takes vertex colours in its
@@ -54,6 +62,15 @@ struct PatchArrays {
     /// RGBA8 rows top to bottom (sampled at v = 0 first, as glTF: `flipY` false), width,
     /// height.
     texture: Option<(Vec<u8>, u32, u32)>,
+    /// The morph targets, as `positions`, `normals`, `colors` and `uvs` (empty when no
+    /// vertex moves; a vertex whose target is itself repeats its own).
+    targets: Vec<f32>,
+    target_normals: Vec<f32>,
+    target_colors: Vec<f32>,
+    target_uvs: Vec<f32>,
+    /// Mip levels between the texture's texels and the parent's
+    /// ([`tessera_render::texel_lod`]): drawn at ratio r, sampled no finer than r times it.
+    texel_lod: f32,
 }
 
 /// The adapter's `ResidentStore`: patches kept as arrays until the page takes them, with
@@ -67,8 +84,12 @@ struct KeptStore {
     colors: bool,
     textured: bool,
     max_texture_dim: u32,
-    /// Resident nodes: their bytes and their arrays until taken.
-    held: FxHashMap<u32, (u64, Option<PatchArrays>)>,
+    /// Resident nodes: their bytes, their texture's texel size (model space, 0 without)
+    /// and their arrays until taken.
+    held: FxHashMap<u32, (u64, f32, Option<PatchArrays>)>,
+    /// Each node's parent and the parent's error (for the texel detail a textured patch
+    /// morphs from).
+    parents: Vec<(u32, f32)>,
     bytes: u64,
     added: Vec<u32>,
     removed: Vec<u32>,
@@ -76,48 +97,96 @@ struct KeptStore {
     evicted: u64,
 }
 
+/// Whether any vertex of `patch` moves when it morphs.
+fn morphs(patch: &PatchData) -> bool {
+    patch.morph_targets.len() == patch.positions.len()
+        && patch
+            .morph_targets
+            .iter()
+            .zip(&patch.positions)
+            .any(|(t, q)| t != q)
+}
+
 impl KeptStore {
-    fn arrays(&self, patch: &PatchData) -> PatchArrays {
-        let o = self.origin;
+    fn position(&self, q: [u32; 3]) -> [f32; 3] {
+        let p = DVec3::from(self.grid.position(q)) - self.origin;
+        [p.x as f32, p.y as f32, p.z as f32]
+    }
+
+    fn arrays(&self, patch: &PatchData, siblings: &[&PatchData], texel_lod: f32) -> PatchArrays {
         let positions = patch
             .positions
             .iter()
-            .flat_map(|&q| {
-                let p = DVec3::from(self.grid.position(q)) - o;
-                [p.x as f32, p.y as f32, p.z as f32]
-            })
+            .flat_map(|&q| self.position(q))
             .collect();
-        let normals = patch.normals.iter().flatten().copied().collect();
-        let colors = if self.colors {
-            patch
-                .colors
-                .iter()
-                .flat_map(|c| {
-                    [
-                        srgb_to_linear(c[0]),
-                        srgb_to_linear(c[1]),
-                        srgb_to_linear(c[2]),
-                    ]
-                })
-                .collect()
+        let has_normals = patch.normals.len() == patch.positions.len();
+        let normals = if has_normals {
+            patch.normals.iter().flatten().copied().collect()
         } else {
             Vec::new()
         };
-        let uvs = if patch.charts.is_empty() {
-            Vec::new()
+        let linear = |c: [u8; 4]| {
+            [
+                srgb_to_linear(c[0]),
+                srgb_to_linear(c[1]),
+                srgb_to_linear(c[2]),
+            ]
+        };
+        let has_colors = self.colors && patch.colors.len() == patch.positions.len();
+        let colors = if has_colors {
+            patch.colors.iter().flat_map(|&c| linear(c)).collect()
         } else {
+            Vec::new()
+        };
+        let textured = !patch.charts.is_empty();
+        let chart = |i: usize| {
+            patch
+                .chart_ids
+                .get(i)
+                .and_then(|&c| patch.charts.get(usize::from(c)))
+        };
+        let mapped = |i: usize, uv: [f32; 2]| chart(i).map_or([0.0; 2], |ch| ch.map(uv));
+        let uvs = if textured {
             patch
                 .uvs
                 .iter()
-                .zip(&patch.chart_ids)
-                .flat_map(|(&uv, &c)| {
-                    patch
-                        .charts
-                        .get(c as usize)
-                        .map_or([0.0; 2], |ch| ch.map(uv))
-                })
+                .enumerate()
+                .flat_map(|(i, &uv)| mapped(i, uv))
                 .collect()
+        } else {
+            Vec::new()
         };
+        // The morph targets: the GPU cache's lookup, as f32 arrays beside the own.
+        let (mut targets, mut target_normals, mut target_colors, mut target_uvs) =
+            (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        let found = tessera_render::morph_targets(patch, siblings, textured);
+        if !found.is_empty() {
+            let n = patch.positions.len();
+            targets.reserve(n * 3);
+            for (i, t) in found.iter().enumerate() {
+                let q = t.as_ref().map_or(patch.positions[i], |t| t.position);
+                targets.extend(self.position(q));
+                let donor = t.as_ref().and_then(|t| t.donor);
+                if has_normals {
+                    let n = donor
+                        .and_then(|(s, j)| {
+                            (s.normals.len() == s.positions.len()).then(|| s.normals[j])
+                        })
+                        .unwrap_or(patch.normals[i]);
+                    target_normals.extend(n);
+                }
+                if has_colors {
+                    let c = donor
+                        .and_then(|(s, j)| s.colors.get(j).copied())
+                        .unwrap_or(patch.colors[i]);
+                    target_colors.extend(linear(c));
+                }
+                if textured {
+                    let uv = t.as_ref().and_then(|t| t.uv).unwrap_or(patch.uvs[i]);
+                    target_uvs.extend(mapped(i, uv));
+                }
+            }
+        }
         let texture = patch
             .texture
             .as_ref()
@@ -144,7 +213,36 @@ impl KeptStore {
             uvs,
             indices: patch.indices.clone(),
             texture,
+            targets,
+            target_normals,
+            target_colors,
+            target_uvs,
+            texel_lod,
         }
+    }
+
+    /// The model-space size of a texel of `patch`'s texture (0 without one).
+    fn texel_size(&self, patch: &PatchData) -> f32 {
+        patch
+            .texture
+            .as_ref()
+            .filter(|t| !t.rgba.is_empty())
+            .map_or(0.0, |t| {
+                tessera_render::patch_texel_size(patch, t.width, t.height, self.grid.step())
+            })
+    }
+
+    /// [`tessera_render::texel_lod`] of `node` with texels of `texel_size`: its parent's
+    /// when resident, else the one the parent's error allows.
+    fn texel_lod(&self, node: u32, texel_size: f32) -> f32 {
+        let Some(&(parent, error)) = self.parents.get(node as usize) else {
+            return 0.0;
+        };
+        if parent == tessera_format::NO_NODE {
+            return 0.0;
+        }
+        let parent_texel = self.held.get(&parent).map_or(0.0, |h| h.1);
+        tessera_render::texel_lod(texel_size, parent_texel, error)
     }
 }
 
@@ -153,12 +251,14 @@ impl ResidentStore for KeptStore {
         let tex = patch.texture.as_ref().map_or(0, |t| {
             tessera_render::texture_gpu_bytes(t.width, t.height, self.max_texture_dim)
         });
-        patch.positions.len() as u64 * vertex_bytes(self.colors, self.textured)
+        patch.positions.len() as u64 * vertex_bytes(self.colors, self.textured, morphs(patch))
             + patch.indices.len() as u64 * 4
             + tex
     }
     fn estimate_bytes(&self, vertices: u32, triangles: u32) -> u64 {
-        u64::from(vertices) * vertex_bytes(self.colors, self.textured) + u64::from(triangles) * 12
+        // As a patch that morphs (all but roots, nearly).
+        u64::from(vertices) * vertex_bytes(self.colors, self.textured, true)
+            + u64::from(triangles) * 12
     }
     fn estimate_texture_bytes(&self, size: [u16; 2]) -> u64 {
         tessera_render::texture_gpu_bytes(
@@ -168,16 +268,26 @@ impl ResidentStore for KeptStore {
         )
     }
     fn upload(&mut self, node: u32, patch: &PatchData) -> Result<u64, StoreError> {
+        self.upload_in_group(node, patch, &[])
+    }
+    fn upload_in_group(
+        &mut self,
+        node: u32,
+        patch: &PatchData,
+        siblings: &[&PatchData],
+    ) -> Result<u64, StoreError> {
         self.evict(node);
         let bytes = self.bytes_for(patch);
-        let arrays = self.arrays(patch);
-        self.held.insert(node, (bytes, Some(arrays)));
+        let texel_size = self.texel_size(patch);
+        let lod = self.texel_lod(node, texel_size);
+        let arrays = self.arrays(patch, siblings, lod);
+        self.held.insert(node, (bytes, texel_size, Some(arrays)));
         self.bytes += bytes;
         self.added.push(node);
         Ok(bytes)
     }
     fn evict(&mut self, node: u32) {
-        if let Some((b, _)) = self.held.remove(&node) {
+        if let Some((b, _, _)) = self.held.remove(&node) {
             self.bytes -= b;
             self.removed.push(node);
             self.evicted += 1;
@@ -232,7 +342,7 @@ impl Stream {
         // The positions' origin: the bounding sphere's centre on the quantisation grid's
         // origin side, so f32 positions keep their precision about the model.
         let origin = DVec3::new(b[0], b[1], b[2]);
-        let mut scheduler = new_scheduler(&index, o.tolerance_px, o.memory);
+        let mut scheduler = new_scheduler(&index, &o);
         // The workers need not make mips: WebGL makes them at upload.
         let mut source = Remote::new(http, &index, roots, false);
         let mut store = KeptStore {
@@ -243,6 +353,17 @@ impl Stream {
             textured,
             max_texture_dim: o.max_texture_dim.unwrap_or(4096),
             held: FxHashMap::default(),
+            parents: index
+                .nodes()
+                .iter()
+                .map(|n| {
+                    let e = index
+                        .nodes()
+                        .get(n.parent as usize)
+                        .map_or(0.0, |p| p.error);
+                    (n.parent, e)
+                })
+                .collect(),
             bytes: 0,
             added: Vec::new(),
             removed: Vec::new(),
@@ -344,7 +465,7 @@ impl Stream {
         let mut added = std::mem::take(&mut self.store.added);
         added.sort_unstable();
         added.dedup();
-        added.retain(|n| self.store.held.get(n).is_some_and(|(_, a)| a.is_some()));
+        added.retain(|n| self.store.held.get(n).is_some_and(|h| h.2.is_some()));
         added
     }
 
@@ -354,9 +475,12 @@ impl Stream {
     /// (Float32Array x 3, linear, empty without vertex colours), `uvs` (Float32Array
     /// x 2 into the patch texture, v down, empty without one), `indices`
     /// (Uint32Array), and with a texture `texture` (Uint8Array RGBA8, rows top to
-    /// bottom), `width`, `height`; `level`. Undefined when not resident or taken.
+    /// bottom), `width`, `height`; `level`; the morph targets `targets`,
+    /// `targetNormals`, `targetColors`, `targetUvs` (as the own arrays, all empty when
+    /// no vertex moves) and `texelLod` (drawn at ratio r, sample the texture no finer
+    /// than mip level r * texelLod). Undefined when not resident or taken.
     pub fn take_patch(&mut self, node: u32) -> JsValue {
-        let Some(a) = self.store.held.get_mut(&node).and_then(|(_, a)| a.take()) else {
+        let Some(a) = self.store.held.get_mut(&node).and_then(|h| h.2.take()) else {
             return JsValue::UNDEFINED;
         };
         let o = js_sys::Object::new();
@@ -381,6 +505,12 @@ impl Stream {
             "indices",
             &js_sys::Uint32Array::from(&a.indices[..]).into(),
         );
+        let f32s = |key: &str, v: &[f32]| set(&o, key, &js_sys::Float32Array::from(v).into());
+        f32s("targets", &a.targets);
+        f32s("targetNormals", &a.target_normals);
+        f32s("targetColors", &a.target_colors);
+        f32s("targetUvs", &a.target_uvs);
+        set(&o, "texelLod", &JsValue::from(a.texel_lod));
         if let Some((rgba, w, h)) = &a.texture {
             set(&o, "texture", &js_sys::Uint8Array::from(&rgba[..]).into());
             set(&o, "width", &JsValue::from(*w));
@@ -400,6 +530,21 @@ impl Stream {
     /// what is resident).
     pub fn draw(&self) -> Vec<u32> {
         self.m.scheduler.draw().to_vec()
+    }
+
+    /// The morph ratio of each node of [`Stream::draw`] (same order): 0 draws a patch at
+    /// its own shape, 1 at its parent's (blend each vertex toward its target by it). All
+    /// zero with morphing off.
+    pub fn ratios(&self) -> Vec<f32> {
+        let r = self.m.scheduler.morph_ratios();
+        (0..self.m.scheduler.draw().len())
+            .map(|k| r.get(k).copied().unwrap_or(0.0))
+            .collect()
+    }
+
+    /// Turns geomorphing on or off from the next frame on.
+    pub fn set_morph(&mut self, enabled: bool) {
+        self.m.scheduler.set_morph(enabled);
     }
 
     /// Stops streaming: requests in flight finish into nothing (also on drop).

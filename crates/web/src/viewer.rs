@@ -972,6 +972,9 @@ pub(crate) struct StreamOptions {
     pub prefix_bytes: u64,
     /// `maxTextureDim` (default none).
     pub max_texture_dim: Option<u32>,
+    /// `morph` (default true): geomorphing (patches blend from their parent's shape;
+    /// false draws each at its own, so refinements pop in).
+    pub morph: bool,
 }
 
 impl StreamOptions {
@@ -989,24 +992,24 @@ impl StreamOptions {
                 .as_f64()
                 .filter(|d| d.is_finite() && *d >= 1.0)
                 .map(|d| d as u32),
+            morph: opts["morph"].as_bool().unwrap_or(true),
         };
         Ok((o, opts))
     }
 }
 
-/// The scheduler of an opened model: `memory` bytes, half for the store, a quarter for
-/// decoded patches in RAM (as `tessera render --memory`).
-pub(crate) fn new_scheduler(index: &ModelIndex, tolerance_px: f32, memory: u64) -> Scheduler {
-    Scheduler::new(
-        index,
-        SchedulerOptions {
-            tolerance_px,
-            store_budget_bytes: memory / 2,
-            ram_budget_bytes: memory / 4,
-            clock: now_ms,
-            ..SchedulerOptions::default()
-        },
-    )
+/// The scheduler of an opened model with the options `o`: `memory` bytes, half for the
+/// store, a quarter for decoded patches in RAM (as `tessera render --memory`).
+pub(crate) fn new_scheduler(index: &ModelIndex, o: &StreamOptions) -> Scheduler {
+    let mut options = SchedulerOptions {
+        tolerance_px: o.tolerance_px,
+        store_budget_bytes: o.memory / 2,
+        ram_budget_bytes: o.memory / 4,
+        clock: now_ms,
+        ..SchedulerOptions::default()
+    };
+    options.morph.enabled &= o.morph;
+    Scheduler::new(index, options)
 }
 
 /// The box of `points` (min, max).
@@ -1040,23 +1043,21 @@ impl Viewer {
     /// top of the index of most models; what it lacks is fetched after),
     /// `maxTextureDim` (default: the adapter's; lower makes a device whose largest
     /// texture is that, as a smaller GPU's, at least the canvas's size),
-    /// `cancelRequests` (default true: requests the view stopped wanting are aborted).
-    /// Errors carry a message meant for the page.
+    /// `cancelRequests` (default true: requests the view stopped wanting are aborted),
+    /// `morph` (default true: geomorphing). Errors carry a message meant for the page.
     pub async fn open(
         canvas: web_sys::HtmlCanvasElement,
         url: String,
         options: String,
     ) -> Result<Viewer, JsError> {
         let opened_ms = now_ms();
-        let (
-            StreamOptions {
-                tolerance_px,
-                memory,
-                prefix_bytes,
-                max_texture_dim,
-            },
-            opts,
-        ) = StreamOptions::parse(&options)?;
+        let (o, opts) = StreamOptions::parse(&options)?;
+        let StreamOptions {
+            memory,
+            prefix_bytes,
+            max_texture_dim,
+            ..
+        } = o;
         let camera = match &opts["camera"] {
             Value::Null => None,
             v => Some(Camera::from_json_value(v).map_err(|e| err(format!("camera: {e}")))?),
@@ -1135,7 +1136,7 @@ impl Viewer {
         // largest texture) and drawn through the textured pipeline, as the desktop.
         let textured = index.header().attributes & ATTR_TEXTURE != 0;
         cache.set_textured(0, textured);
-        let mut scheduler = new_scheduler(&index, tolerance_px, memory);
+        let mut scheduler = new_scheduler(&index, &o);
         let mut source = Remote::new(http, &index, roots, textured);
         // `cancelRequests: false` lets requests the view stopped wanting finish (to
         // compare).
