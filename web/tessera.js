@@ -214,6 +214,7 @@ export class View extends EventTarget {
   #frameTimes = [];
   #listeners = [];
   #resizeObserver = null;
+  #visibility = null;
   #shots = [];
   // Touch: the fingers down (pointerId -> canvas pixels) and the gesture they make
   // (null, or the fingers' count and, for two, their last spread).
@@ -239,7 +240,7 @@ export class View extends EventTarget {
 
   #pool = null;
 
-  constructor(viewer, canvas, autoResize, url = '', pool = null) {
+  constructor(viewer, canvas, autoResize, url = '', pool = null, pauseWhenHidden = true) {
     super();
     this.#url = url;
     this.#pool = pool;
@@ -249,6 +250,17 @@ export class View extends EventTarget {
     if (autoResize && typeof ResizeObserver !== 'undefined') {
       this.#resizeObserver = new ResizeObserver(() => this.#fit());
       this.#resizeObserver.observe(canvas);
+    }
+    // A canvas scrolled away (farther than half a screen) draws and fetches nothing
+    // and gives the page's memory back to the views on screen (Viewer::set_visible).
+    if (pauseWhenHidden && typeof IntersectionObserver !== 'undefined') {
+      this.#visibility = new IntersectionObserver(
+        (entries) => {
+          if (this.#viewer) this.#viewer.set_visible(entries[entries.length - 1].isIntersecting);
+        },
+        { rootMargin: '50%' },
+      );
+      this.#visibility.observe(canvas);
     }
     this.#raf = requestAnimationFrame((t) => this.#frame(t));
   }
@@ -352,6 +364,7 @@ export class View extends EventTarget {
     for (const [target, type, fn, opts] of this.#listeners) target.removeEventListener(type, fn, opts);
     this.#listeners = [];
     if (this.#resizeObserver) this.#resizeObserver.disconnect();
+    if (this.#visibility) this.#visibility.disconnect();
     this.#viewer.free();
     this.#viewer = null;
     releasePool(this.#pool);
@@ -617,11 +630,13 @@ export const Tessera = {
    * view has wanted for 4 frames is aborted, so a turned camera does not wait behind
    * the bytes of the view it left; false lets every request finish), morph (default
    * true: geomorphing, a refinement blends in from its parent's shape; false draws
-   * every patch at its own, so refinements pop).
+   * every patch at its own, so refinements pop), pauseWhenHidden (default true: while
+   * the canvas is scrolled away, more than half a screen off, the view draws and
+   * fetches nothing and its demand on the page's shared memory is 0; stats.hidden).
    */
   async view(
     canvas,
-    { url, tolerancePx = 1, memoryBytes = 512 * 1048576, camera = null, autoResize = true, prefixBytes = 65536, maxTextureDim = null, workers = defaultWorkers(), cancelRequests = true, morph = true } = {},
+    { url, tolerancePx = 1, memoryBytes = 512 * 1048576, camera = null, autoResize = true, prefixBytes = 65536, maxTextureDim = null, workers = defaultWorkers(), cancelRequests = true, morph = true, pauseWhenHidden = true } = {},
   ) {
     if (!url) throw new Error('Tessera.view: no model URL given');
     if (!hasWebGL2()) {
@@ -648,7 +663,7 @@ export const Tessera = {
     const viewer = await Viewer.open(canvas, abs, options);
     const p = acquirePool(workers);
     if (p) viewer.set_decoder((job) => p.decode(job), p.size);
-    return new View(viewer, canvas, autoResize, abs, p);
+    return new View(viewer, canvas, autoResize, abs, p, pauseWhenHidden);
   },
 };
 

@@ -54,7 +54,10 @@
 // {"model", "size": [w, h], "memory_bytes", "count", "camera"} on web/tests/blank.html:
 // `count` views of the model on canvases of that size, each opened with memoryBytes,
 // waited until all are idle: their stats ("open"); then all but the last disposed and
-// the last waited until it has run a frame and is idle again: its stats ("alone")),
+// the last waited until it has run a frame and is idle again: its stats ("alone"));
+// with "spacer_px", a block that tall between the canvases (the later ones off
+// screen), and before the dispose the last scrolled into view and all idle again:
+// their stats ("scrolled")),
 // "morph" (with "morph": {"shot": PATH, "held_shot": PATH (optional)} on
 // web/three.html, with ?clock=hold for held_shot: see the code; "held" and "idle").
 // Exit 0 when every visit ran (whatever its outcome), 2 on a driver failure.
@@ -321,7 +324,7 @@ for (const visit of plan.visits) {
   let shared = null;
   if (visit.shared && outcome !== 'timeout') {
     try {
-      shared = await page.evaluate(async ({ model, size, memory_bytes, count, camera }) => {
+      shared = await page.evaluate(async ({ model, size, memory_bytes, count, camera, spacer_px = 0 }) => {
         const { Tessera } = await import('./tessera.js');
         const settle = (v) =>
           new Promise((resolve, reject) => {
@@ -335,15 +338,45 @@ for (const visit of plan.visits) {
             check();
           });
         const views = [];
+        const canvases = [];
         for (let k = 0; k < count; k++) {
+          if (k > 0 && spacer_px > 0) {
+            const gap = document.createElement('div');
+            gap.style.height = `${spacer_px}px`;
+            document.body.appendChild(gap);
+          }
           const c = document.createElement('canvas');
           [c.width, c.height] = size;
+          c.style.display = 'block';
           document.body.appendChild(c);
+          canvases.push(c);
           views.push(await Tessera.view(c, { url: model, autoResize: false, memoryBytes: memory_bytes, camera }));
         }
         // Idle together: each once more after the others (a share may move as they load).
-        for (let round = 0; round < 2; round++) for (const v of views) await settle(v);
+        const settleAll = async () => {
+          for (let round = 0; round < 2; round++) for (const v of views) await settle(v);
+        };
+        await settleAll();
         const open = views.map((v) => v.stats);
+        // Spaced: the last canvas scrolled into view (the others off screen), then idle.
+        let scrolled = null;
+        if (spacer_px > 0) {
+          canvases[canvases.length - 1].scrollIntoView();
+          const t = Date.now();
+          const turned = () => views.every((v, k) => v.stats && v.stats.hidden === (k < views.length - 1));
+          while (!turned() && Date.now() - t < 5000) await new Promise((r) => setTimeout(r, 20));
+          // The budgets follow the demands within about 2 s (a falling demand halves
+          // every 0.25 s, BudgetSplit): idle with the same budgets for 1 s.
+          let last = null;
+          for (let k = 0; k < 30; k++) {
+            await settleAll();
+            const now = JSON.stringify(views.map((v) => [v.stats.gpu_budget_bytes, v.stats.triangles]));
+            if (now === last) break;
+            last = now;
+            await new Promise((r) => setTimeout(r, 1000));
+          }
+          scrolled = views.map((v) => v.stats);
+        }
         const last = views[views.length - 1];
         const frame = last.stats.frame;
         for (const v of views.slice(0, -1)) v.dispose();
@@ -351,7 +384,7 @@ for (const visit of plan.visits) {
         while (last.stats.frame === frame && Date.now() - t < 5000) await new Promise((r) => setTimeout(r, 20));
         const alone = await settle(last);
         last.dispose();
-        return { open, alone };
+        return { open, scrolled, alone };
       }, visit.shared);
     } catch (e) {
       consoleLines.push(`driver: shared: ${e.message.split('\n')[0]}`);

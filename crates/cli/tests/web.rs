@@ -1069,35 +1069,9 @@ const TERRAIN_OVERVIEW: &str =
 /// budget and converges to `tessera render --complete`'s cut.
 #[test]
 fn views_on_one_page_share_its_memory_budget() {
-    let web = dist();
-    let tmp = tempfile::tempdir().unwrap();
-    let dir = tmp.path();
-    let (models, model) = build_terrain(dir);
-    let www = web_copy(dir, &web);
-    let (_server, addr) = serve(&models, &www);
     let memory: u64 = 4 << 20;
     let store = memory / 2;
-    let camera: Value = serde_json::from_str(&format!(
-        r#"{TERRAIN_OVERVIEW}, "width": {WIDTH}, "height": {HEIGHT}}}"#
-    ))
-    .unwrap();
-    let base = format!("http://{addr}");
-    let shared = |count: u32| {
-        json!({"model": format!("{base}/models/terrain.tsr"), "size": [WIDTH, HEIGHT],
-               "memory_bytes": memory, "count": count, "camera": camera})
-    };
-    let results = browse_alone(
-        json!([
-            {"name": "two", "url": format!("{base}/blank.html"), "expect": "loaded",
-             "timeout_ms": 180000, "shared": shared(2)},
-        ]),
-        &[],
-        dir,
-    );
-    let r = result(&results, "two");
-    let sh = &r["shared"];
-    assert!(sh.is_object(), "no shared result: {r:#}");
-    let (_, full) = render(&model, TERRAIN_OVERVIEW, &dir.join("render-overview"));
+    let (sh, full) = two_terrain_views(memory, None);
     let open = sh["open"].as_array().unwrap();
     let alone = &sh["alone"];
     let n = |v: &Value, k: &str| v[k].as_u64().unwrap_or_else(|| panic!("{k}: {v:#}"));
@@ -1140,6 +1114,87 @@ fn views_on_one_page_share_its_memory_budget() {
         full,
         "alone, the view converges to the whole cut: {alone:#}"
     );
+}
+
+/// A view scrolled away gives the page's memory back (issue 13): the same two views of
+/// the terrain's overview as [`views_on_one_page_share_its_memory_budget`] (each with
+/// 4 MiB, the page's 2 MiB of store less than the two cuts need), but the second below
+/// a 3000-pixel block, off screen: it draws and fetches nothing (`hidden`) and asks
+/// nothing of the budget, so the first converges to the whole cut, as it does alone
+/// (sharing, each settles on about half of it: the test above). Scrolled to the second,
+/// the roles swap.
+#[test]
+fn a_view_scrolled_away_gives_the_page_memory_to_the_view_on_screen() {
+    let (sh, full) = two_terrain_views(4 << 20, Some(3000));
+    let n = |v: &Value, k: &str| v[k].as_u64().unwrap_or_else(|| panic!("{k}: {v:#}"));
+    for (phase, shown) in [("open", 0), ("scrolled", 1)] {
+        let views = sh[phase]
+            .as_array()
+            .unwrap_or_else(|| panic!("{phase}: {sh:#}"));
+        for (k, v) in views.iter().enumerate() {
+            eprintln!(
+                "{phase}: view {k}: hidden {}, {} triangles ({full} for tessera render --complete), {} of {} budget bytes on the GPU, {} requests",
+                v["hidden"], n(v, "triangles"), n(v, "gpu_bytes"), n(v, "gpu_budget_bytes"), n(v, "requests")
+            );
+            if std::env::var_os("TESSERA_DEBUG_STATS").is_some() {
+                eprintln!("{v:#}");
+            }
+            assert_eq!(n(v, "page_models"), 2, "{v:#}");
+            assert_eq!(n(v, "pending"), 0, "{v:#}");
+            assert!(n(v, "gpu_bytes") <= n(v, "gpu_budget_bytes"), "{v:#}");
+            if k == shown {
+                assert_eq!(v["hidden"], false, "{phase}: view {k}: {v:#}");
+                assert_eq!(
+                    n(v, "triangles"),
+                    full,
+                    "{phase}: the view on screen converges to the whole cut: {v:#}"
+                );
+            } else {
+                assert_eq!(v["hidden"], true, "{phase}: view {k}: {v:#}");
+                assert_eq!(n(v, "triangles"), 0, "{phase}: view {k}: {v:#}");
+            }
+        }
+    }
+    // The view scrolled away fetched nothing more while hidden.
+    let (open, scrolled) = (&sh["open"][0], &sh["scrolled"][0]);
+    assert_eq!(
+        n(open, "requests"),
+        n(scrolled, "requests"),
+        "{open:#} / {scrolled:#}"
+    );
+}
+
+/// Two views of the terrain's overview on one page (`browser.mjs`'s `shared` visit), each
+/// opened with `memory` bytes, with `spacer_px` between them if given (in a window one
+/// view high): the visit's `shared` result and the triangles of `tessera render
+/// --complete`'s cut of the same view.
+fn two_terrain_views(memory: u64, spacer_px: Option<u32>) -> (Value, u64) {
+    let web = dist();
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let (models, model) = build_terrain(dir);
+    let www = web_copy(dir, &web);
+    let (_server, addr) = serve(&models, &www);
+    let camera: Value = serde_json::from_str(&format!(
+        r#"{TERRAIN_OVERVIEW}, "width": {WIDTH}, "height": {HEIGHT}}}"#
+    ))
+    .unwrap();
+    let base = format!("http://{addr}");
+    let mut shared = json!({"model": format!("{base}/models/terrain.tsr"), "size": [WIDTH, HEIGHT],
+                            "memory_bytes": memory, "count": 2, "camera": camera});
+    let mut visit = json!({"name": "two", "url": format!("{base}/blank.html"), "expect": "loaded",
+                           "timeout_ms": 180000});
+    if let Some(px) = spacer_px {
+        shared["spacer_px"] = json!(px);
+        visit["viewport"] = json!([WIDTH, HEIGHT]);
+    }
+    visit["shared"] = shared;
+    let results = browse_alone(json!([visit]), &[], dir);
+    let r = result(&results, "two");
+    let sh = r["shared"].clone();
+    assert!(sh.is_object(), "no shared result: {r:#}");
+    let (_, full) = render(&model, TERRAIN_OVERVIEW, &dir.join("render-overview"));
+    (sh, full)
 }
 
 /// The Bunny built into `dir/models/bunny.tsr`; the models directory and the file.

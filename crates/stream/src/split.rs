@@ -114,35 +114,53 @@ impl BudgetSplit {
         // (a model with nothing to show gives everything back); rising ones take what
         // the others left, in proportion to how far they are below their targets.
         let band = total / DEAD_BAND_DIVISOR;
-        let mut store: Vec<u64> = if self.budgets.len() != n {
-            target.clone()
-        } else {
-            (0..n)
-                .map(|i| {
-                    let cur = self.budgets[i].0;
-                    // (Lowering a budget above what the model holds costs nothing.)
-                    let held = target[i] < cur
-                        && cur - target[i] <= band
-                        && target[i] > models[i].pinned_bytes
-                        && target[i] < models[i].resident_bytes;
-                    if held {
-                        cur
-                    } else {
-                        target[i].min(cur)
-                    }
-                })
-                .collect()
-        };
-        let room = total.saturating_sub(store.iter().sum());
-        let short: Vec<u64> = (0..n)
-            .map(|i| target[i] - target[i].min(store[i]))
-            .collect();
-        let short_sum: u64 = short.iter().sum();
-        for i in 0..n {
-            if short_sum > 0 {
-                let add = (room as f64 * short[i] as f64 / short_sum as f64) as u64;
-                store[i] += add.min(short[i]);
+        // `hold`: keep the budgets the dead band allows. Only while that starves no
+        // model whose whole demand the split meets (under-subscribed): a budget held
+        // above its target must not leave such a model below what its view needs for
+        // good (a view scrolled back to would miss the last group of its cut by the
+        // few bytes a hidden one keeps). Over-subscribed, every model is short of its
+        // demand anyway and the band holds.
+        let split = |hold: bool| -> (Vec<u64>, bool) {
+            let mut store: Vec<u64> = if self.budgets.len() != n {
+                target.clone()
+            } else {
+                (0..n)
+                    .map(|i| {
+                        let cur = self.budgets[i].0;
+                        // (Lowering a budget above what the model holds costs nothing.)
+                        let held = hold
+                            && target[i] < cur
+                            && cur - target[i] <= band
+                            && target[i] > models[i].pinned_bytes
+                            && target[i] < models[i].resident_bytes;
+                        if held {
+                            cur
+                        } else {
+                            target[i].min(cur)
+                        }
+                    })
+                    .collect()
+            };
+            let room = total.saturating_sub(store.iter().sum());
+            let short: Vec<u64> = (0..n)
+                .map(|i| target[i] - target[i].min(store[i]))
+                .collect();
+            let short_sum: u64 = short.iter().sum();
+            for i in 0..n {
+                if short_sum > 0 {
+                    let add = (room as f64 * short[i] as f64 / short_sum as f64) as u64;
+                    store[i] += add.min(short[i]);
+                }
             }
+            let starved = (0..n).any(|i| {
+                let needs = models[i].wanted_bytes.max(models[i].pinned_bytes);
+                target[i] >= needs && store[i] < needs
+            });
+            (store, starved)
+        };
+        let (mut store, starved) = split(true);
+        if starved {
+            store = split(false).0;
         }
         if store.iter().sum::<u64>() > total.max(target.iter().sum()) {
             store = target;
@@ -302,6 +320,27 @@ mod tests {
             .update(0.04, &[demand(3 << 20, 0, held / 2), demand(up, 0, held)])
             .to_vec();
         assert!(b2[0].0 < b1[0].0 && b2[1].0 > b1[1].0, "{b1:?} -> {b2:?}");
+    }
+
+    #[test]
+    fn the_dead_band_never_starves_a_demand_the_budget_can_meet() {
+        let total = 1u64 << 20;
+        let mut s = BudgetSplit::new(total, 0);
+        // A shows nothing and holds a cache (the surplus keeps it); B's cut fits.
+        let cache = total - 600_000;
+        let b0 = s
+            .update(0.0, &[demand(0, 0, cache), demand(600_000, 0, 600_000)])
+            .to_vec();
+        assert_eq!(b0[1].0, 600_000);
+        assert_eq!(b0[0].0, cache);
+        // B needs 10 kB more, less than the dead band of A's fall: A gives it anyway,
+        // or B would miss the last group of its cut for good.
+        assert!(10_000 < total / DEAD_BAND_DIVISOR);
+        let b1 = s
+            .update(0.02, &[demand(0, 0, cache), demand(610_000, 0, 600_000)])
+            .to_vec();
+        assert_eq!(b1[1].0, 610_000, "{b0:?} -> {b1:?}");
+        assert_eq!(b1[0].0, cache - 10_000, "{b0:?} -> {b1:?}");
     }
 
     #[test]

@@ -658,6 +658,9 @@ pub(crate) struct Streamed {
     warning: Option<String>,
     /// The model's place in the page's budgets (shared by every model on the page).
     budget: crate::budget::Registration,
+    /// Not shown (a view scrolled away: [`Viewer::set_visible`]): frames are
+    /// [`Streamed::hidden_frame`]s and its demand is 0.
+    pub hidden: bool,
 }
 
 impl Drop for Streamed {
@@ -692,6 +695,7 @@ impl Streamed {
             // The scheduler's budgets at open are the model's own.
             budget: crate::budget::Registration::new(scheduler.budgets()),
             scheduler,
+            hidden: false,
         }
     }
 
@@ -752,10 +756,28 @@ impl Streamed {
         }
     }
 
-    /// What the model asks of the page's budgets: its last frame's.
+    /// A frame of the model while it is not shown: nothing selected, drawn or asked
+    /// for (requests in flight finish into the RAM cache), and its store evicted down
+    /// to its share of the page's budgets, asked with a demand of 0: what it holds goes
+    /// to the page's other models as they need it (the desktop's rule for a hidden
+    /// model of a scene, `Scheduler::idle_frame`).
+    pub fn hidden_frame(&mut self, time_ms: f64, store: &mut impl ResidentStore) {
+        let (store_budget, ram_budget) = self.budget.update(time_ms / 1e3, self.demand());
+        if (store_budget, ram_budget) != self.scheduler.budgets() {
+            self.scheduler.set_budgets(store_budget, ram_budget);
+        }
+        self.stats = self.scheduler.idle_frame(&mut self.source, store);
+    }
+
+    /// What the model asks of the page's budgets: its last frame's (nothing while
+    /// hidden).
     fn demand(&self) -> ModelDemand {
         ModelDemand {
-            wanted_bytes: self.stats.wanted_bytes,
+            wanted_bytes: if self.hidden {
+                0
+            } else {
+                self.stats.wanted_bytes
+            },
             pinned_bytes: self.scheduler.pinned_bytes(),
             resident_bytes: self.scheduler.resident_bytes(),
         }
@@ -817,6 +839,8 @@ impl Streamed {
             "page_models": self.budget.page_models(),
             // Groups the view needs that its budgets leave out this frame.
             "budget_limited": s.budget_limited,
+            // The store bytes the view's whole cut needs (its demand on the budgets).
+            "wanted_bytes": s.wanted_bytes,
             "failed_patches": s.failed_patches,
             "index_nodes": self.index.nodes().len(),
             "model_nodes": self.index.header().node_count,
@@ -1208,7 +1232,16 @@ impl Viewer {
         // (An idle view follows its share of the page's budgets too.)
         let idle = self.converged && !moving && !self.dirty && !self.m.budget_moved(time_ms);
         let mut drew = false;
-        if !idle {
+        if self.m.hidden {
+            // Scrolled away: no selection, draw or request; the memory given back.
+            let mut store = TimedStore::of(
+                &mut self.cache,
+                &self.gpu,
+                self.quant_step,
+                &mut self.uploads,
+            );
+            self.m.hidden_frame(time_ms, &mut store);
+        } else if !idle {
             let camera = self.nav.camera();
             let mut store = TimedStore::of(
                 &mut self.cache,
@@ -1252,6 +1285,8 @@ impl Viewer {
         let own = json!({
             // Whether this call drew the canvas (a screenshot reads it right after).
             "drew": drew,
+            // Not shown (scrolled away): nothing drawn or fetched, demand 0.
+            "hidden": self.m.hidden,
             // GPU bytes of the resident patches, their textures (mips included) in
             // them, and the textures' part.
             "gpu_bytes": s.gpu_resident_bytes,
@@ -1402,6 +1437,17 @@ impl Viewer {
     pub fn set_tolerance_px(&mut self, tolerance_px: f32) {
         self.m.scheduler.set_tolerance_px(tolerance_px);
         self.dirty = true;
+    }
+
+    /// Whether the canvas is on screen (the page's IntersectionObserver). A hidden view
+    /// draws, selects and fetches nothing, and its demand on the page's budgets is 0,
+    /// so the views on screen get the memory it held as they need it (it keeps what
+    /// they leave it); shown again, it selects and draws at its next frame.
+    pub fn set_visible(&mut self, visible: bool) {
+        if self.m.hidden == visible {
+            self.m.hidden = !visible;
+            self.dirty = true;
+        }
     }
 
     /// A mouse button went down at (`x`, `y`) canvas pixels: 0 left (orbit; with
