@@ -33,45 +33,11 @@
 // Exit 0 when the visits ran (whatever their outcome), 2 on a driver failure.
 
 import { readFileSync } from 'node:fs';
-import { join } from 'node:path';
-import { createRequire } from 'node:module';
-
-const require = createRequire(import.meta.url);
-
-function loadPlaywright() {
-  for (const p of ['playwright-core', join(process.cwd(), 'node_modules', 'playwright-core'), join(process.cwd(), 'web', 'node_modules', 'playwright-core'), '/usr/lib/node_modules/playwright-core', '/usr/local/lib/node_modules/playwright-core']) {
-    try {
-      return require(p);
-    } catch (_) {}
-  }
-  throw new Error('playwright-core is missing: run `npm install` in web/');
-}
+import { launchChromium } from './chromium.mjs';
 
 const plan = JSON.parse(readFileSync(process.argv[2], 'utf8'));
 const timeout = plan.timeout_ms || 300000;
-const { chromium } = loadPlaywright();
-let browser;
-try {
-  browser = await chromium.launch({
-    executablePath: plan.chromium || '/usr/bin/chromium',
-    headless: true,
-    args: [
-      '--no-sandbox',
-      '--disable-quic',
-      '--no-first-run',
-      '--disable-background-networking',
-      '--disable-component-update',
-      '--disable-sync',
-      '--use-angle=swiftshader',
-      '--enable-unsafe-swiftshader',
-      '--enable-precise-memory-info',
-      ...(plan.extra_args || []),
-    ],
-  });
-} catch (e) {
-  console.error(`bench-web.mjs: cannot start Chromium: ${e.message}`);
-  process.exit(2);
-}
+const browser = await launchChromium(plan, ['--enable-precise-memory-info'], 'bench-web.mjs');
 
 // Before any page script: every frame's statistics recorded as the page publishes them.
 function recorder() {

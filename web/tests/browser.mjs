@@ -63,50 +63,10 @@
 // Exit 0 when every visit ran (whatever its outcome), 2 on a driver failure.
 
 import { readFileSync, writeFileSync } from 'node:fs';
-import { join } from 'node:path';
-import { createRequire } from 'node:module';
-
-const require = createRequire(import.meta.url);
-
-function loadPlaywright() {
-  try {
-    return require('playwright-core');
-  } catch (_) {
-    // Installed by .ci/run with `npm install` in web/, or globally.
-    for (const p of [join(process.cwd(), 'node_modules', 'playwright-core'), '/usr/lib/node_modules/playwright-core', '/usr/local/lib/node_modules/playwright-core']) {
-      try {
-        return require(p);
-      } catch (_) {}
-    }
-    throw new Error('playwright-core is missing: run `npm install` in web/ (or npm install -g playwright-core)');
-  }
-}
+import { launchChromium } from './chromium.mjs';
 
 const plan = JSON.parse(readFileSync(process.argv[2], 'utf8'));
-const { chromium } = loadPlaywright();
-let browser;
-try {
-  browser = await chromium.launch({
-    executablePath: plan.chromium || '/usr/bin/chromium',
-    headless: true,
-    // ../shared/STACK.md: headless Chromium with WebGL2 on SwiftShader (playwright
-    // gives each launch a fresh profile directory of its own).
-    args: [
-      '--no-sandbox',
-      '--disable-quic',
-      '--no-first-run',
-      '--disable-background-networking',
-      '--disable-component-update',
-      '--disable-sync',
-      '--use-angle=swiftshader',
-      '--enable-unsafe-swiftshader',
-      ...(plan.extra_args || []),
-    ],
-  });
-} catch (e) {
-  console.error(`browser.mjs: cannot start Chromium: ${e.message}`);
-  process.exit(2);
-}
+const browser = await launchChromium(plan, [], 'browser.mjs');
 
 const results = [];
 for (const visit of plan.visits) {

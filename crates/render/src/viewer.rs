@@ -253,11 +253,7 @@ impl Viewer {
         let demands: Vec<ModelDemand> = self
             .models
             .iter()
-            .map(|m| ModelDemand {
-                wanted_bytes: if m.visible { m.stats.wanted_bytes } else { 0 },
-                pinned_bytes: m.scheduler.pinned_bytes(),
-                resident_bytes: m.scheduler.resident_bytes(),
-            })
+            .map(|m| ModelDemand::of(&m.scheduler, m.stats.wanted_bytes, m.visible))
             .collect();
         // Split what the cache can really hold (its two buffers may fill unevenly).
         let usable = self.cache.usable_bytes().min(self.opts.gpu_budget_bytes);

@@ -51,6 +51,26 @@ pub struct ModelDemand {
     pub resident_bytes: u64,
 }
 
+impl ModelDemand {
+    pub fn new(wanted_bytes: u64, pinned_bytes: u64, resident_bytes: u64) -> Self {
+        Self {
+            wanted_bytes,
+            pinned_bytes,
+            resident_bytes,
+        }
+    }
+
+    /// A model's demand: the `wanted_bytes` of its last frame's stats, none when it is
+    /// not shown, and what its scheduler holds.
+    pub fn of(scheduler: &crate::Scheduler, wanted_bytes: u64, shown: bool) -> Self {
+        Self::new(
+            if shown { wanted_bytes } else { 0 },
+            scheduler.pinned_bytes(),
+            scheduler.resident_bytes(),
+        )
+    }
+}
+
 /// Per-model budgets from one store total and one RAM total. See the module docs.
 #[derive(Clone, Debug)]
 pub struct BudgetSplit {
@@ -232,20 +252,14 @@ impl BudgetSplit {
 mod tests {
     use super::*;
 
-    fn demand(wanted: u64, pinned: u64, resident: u64) -> ModelDemand {
-        ModelDemand {
-            wanted_bytes: wanted,
-            pinned_bytes: pinned,
-            resident_bytes: resident,
-        }
-    }
+    use ModelDemand as D;
 
     #[test]
     fn the_model_on_screen_gets_the_memory() {
         let mut s = BudgetSplit::new(1000, 100);
         // A wants far more than the budget, B (off screen) nothing.
         let b = s
-            .update(0.0, &[demand(5000, 10, 10), demand(0, 20, 500)])
+            .update(0.0, &[D::new(5000, 10, 10), D::new(0, 20, 500)])
             .to_vec();
         assert_eq!(b[1].0, 20, "B down to its roots: {b:?}");
         assert_eq!(b[0].0, 980);
@@ -257,7 +271,7 @@ mod tests {
     fn over_subscribed_shares_follow_demand() {
         let mut s = BudgetSplit::new(1000, 0);
         let b = s
-            .update(0.0, &[demand(3000, 0, 0), demand(1000, 0, 0)])
+            .update(0.0, &[D::new(3000, 0, 0), D::new(1000, 0, 0)])
             .to_vec();
         assert_eq!(b[0].0, 750);
         assert_eq!(b[1].0, 250);
@@ -268,7 +282,7 @@ mod tests {
         let mut s = BudgetSplit::new(1000, 0);
         // Demands 300 + 100 fit; A holds 200 beyond its demand, B nothing.
         let b = s
-            .update(0.0, &[demand(300, 0, 500), demand(100, 0, 100)])
+            .update(0.0, &[D::new(300, 0, 500), D::new(100, 0, 100)])
             .to_vec();
         assert_eq!(b[0].0, 900, "{b:?}");
         assert_eq!(b[1].0, 100);
@@ -278,10 +292,10 @@ mod tests {
     fn falling_demand_is_released_smoothly_and_rising_at_once() {
         let mut s = BudgetSplit::new(1 << 20, 0);
         let big = 4 << 20;
-        s.update(0.0, &[demand(big, 0, 0), demand(0, 0, 0)]);
+        s.update(0.0, &[D::new(big, 0, 0), D::new(0, 0, 0)]);
         // B comes into view: served in the same frame (in proportion to the two).
         let b = s
-            .update(0.01, &[demand(0, 0, 0), demand(big, 0, 0)])
+            .update(0.01, &[D::new(0, 0, 0), D::new(big, 0, 0)])
             .to_vec();
         assert!(b[1].0 > (1 << 20) * 4 / 10, "{b:?}");
         assert!(
@@ -293,7 +307,7 @@ mod tests {
         let mut last = b;
         while t < 3.0 {
             t += 0.05;
-            last = s.update(t, &[demand(0, 0, 0), demand(big, 0, 0)]).to_vec();
+            last = s.update(t, &[D::new(0, 0, 0), D::new(big, 0, 0)]).to_vec();
         }
         assert_eq!(last[0].0, 0, "{last:?}");
         assert_eq!(last[1].0, 1 << 20);
@@ -305,19 +319,19 @@ mod tests {
         // Both hold their whole share.
         let held = 1 << 19;
         let b0 = s
-            .update(0.0, &[demand(3 << 20, 0, held), demand(3 << 20, 0, held)])
+            .update(0.0, &[D::new(3 << 20, 0, held), D::new(3 << 20, 0, held)])
             .to_vec();
         // B's demand rises by 2%: A's share would fall by ~0.5% of the total, which
         // would evict: kept.
         let up = (3 << 20) * 102 / 100;
         let b1 = s
-            .update(0.02, &[demand(3 << 20, 0, held), demand(up, 0, held)])
+            .update(0.02, &[D::new(3 << 20, 0, held), D::new(up, 0, held)])
             .to_vec();
         assert_eq!(b0, b1);
         assert!(b1.iter().map(|x| x.0).sum::<u64>() <= 1 << 20);
         // Had A held less than its share, lowering it would cost nothing: applied.
         let b2 = s
-            .update(0.04, &[demand(3 << 20, 0, held / 2), demand(up, 0, held)])
+            .update(0.04, &[D::new(3 << 20, 0, held / 2), D::new(up, 0, held)])
             .to_vec();
         assert!(b2[0].0 < b1[0].0 && b2[1].0 > b1[1].0, "{b1:?} -> {b2:?}");
     }
@@ -329,7 +343,7 @@ mod tests {
         // A shows nothing and holds a cache (the surplus keeps it); B's cut fits.
         let cache = total - 600_000;
         let b0 = s
-            .update(0.0, &[demand(0, 0, cache), demand(600_000, 0, 600_000)])
+            .update(0.0, &[D::new(0, 0, cache), D::new(600_000, 0, 600_000)])
             .to_vec();
         assert_eq!(b0[1].0, 600_000);
         assert_eq!(b0[0].0, cache);
@@ -337,7 +351,7 @@ mod tests {
         // or B would miss the last group of its cut for good.
         assert!(10_000 < total / DEAD_BAND_DIVISOR);
         let b1 = s
-            .update(0.02, &[demand(0, 0, cache), demand(610_000, 0, 600_000)])
+            .update(0.02, &[D::new(0, 0, cache), D::new(610_000, 0, 600_000)])
             .to_vec();
         assert_eq!(b1[1].0, 610_000, "{b0:?} -> {b1:?}");
         assert_eq!(b1[0].0, cache - 10_000, "{b0:?} -> {b1:?}");
@@ -347,7 +361,7 @@ mod tests {
     fn floors_always_hold() {
         let mut s = BudgetSplit::new(100, 0);
         let b = s
-            .update(0.0, &[demand(1000, 60, 60), demand(1000, 70, 70)])
+            .update(0.0, &[D::new(1000, 60, 60), D::new(1000, 70, 70)])
             .to_vec();
         assert_eq!(b, vec![(60, 0), (70, 0)]);
     }

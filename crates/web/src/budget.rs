@@ -165,20 +165,14 @@ impl Drop for Registration {
 mod tests {
     use super::*;
 
-    fn demand(wanted: u64, pinned: u64, resident: u64) -> ModelDemand {
-        ModelDemand {
-            wanted_bytes: wanted,
-            pinned_bytes: pinned,
-            resident_bytes: resident,
-        }
-    }
+    use ModelDemand as D;
 
     #[test]
     fn one_model_keeps_its_own_budget() {
         let mut p = PageBudgets::new();
         let a = p.register((1000, 500));
-        assert_eq!(p.update(a, 0.0, demand(200, 10, 10)), (1000, 500));
-        assert_eq!(p.update(a, 0.1, demand(5000, 10, 900)), (1000, 500));
+        assert_eq!(p.update(a, 0.0, D::new(200, 10, 10)), (1000, 500));
+        assert_eq!(p.update(a, 0.1, D::new(5000, 10, 900)), (1000, 500));
     }
 
     #[test]
@@ -188,13 +182,13 @@ mod tests {
         let b = p.register((1000, 400));
         assert_eq!(p.totals(), (1000, 400));
         // Both over-subscribed: shares follow demand (3:1 beyond the roots).
-        let _ = p.update(a, 0.0, demand(3000, 0, 0));
-        let (sa, _) = p.update(a, 0.0, demand(3000, 0, 0));
-        let (sb, _) = p.update(b, 0.0, demand(1000, 0, 0));
-        let (sa2, ra) = p.update(a, 0.0, demand(3000, 0, 0));
+        let _ = p.update(a, 0.0, D::new(3000, 0, 0));
+        let (sa, _) = p.update(a, 0.0, D::new(3000, 0, 0));
+        let (sb, _) = p.update(b, 0.0, D::new(1000, 0, 0));
+        let (sa2, ra) = p.update(a, 0.0, D::new(3000, 0, 0));
         assert!(sa <= 1000);
         assert_eq!((sa2, sb), (750, 250), "{sa2} {sb}");
-        let (_, rb) = p.update(b, 0.0, demand(1000, 0, 0));
+        let (_, rb) = p.update(b, 0.0, D::new(1000, 0, 0));
         assert!(ra + rb <= 400 && ra > rb, "{ra} {rb}");
     }
 
@@ -203,11 +197,11 @@ mod tests {
         let mut p = PageBudgets::new();
         let small = p.register((100, 50));
         let big = p.register((1000, 500));
-        let _ = p.update(big, 0.0, demand(0, 0, 0));
-        let (s, r) = p.update(small, 0.0, demand(5000, 0, 0));
+        let _ = p.update(big, 0.0, D::new(0, 0, 0));
+        let (s, r) = p.update(small, 0.0, D::new(5000, 0, 0));
         assert_eq!((s, r), (100, 50));
         // The big one, alone on screen, gets the rest of the page's total.
-        let (s, _) = p.update(big, 0.0, demand(5000, 0, 0));
+        let (s, _) = p.update(big, 0.0, D::new(5000, 0, 0));
         assert!(s <= 1000 && s >= 450, "{s}");
     }
 
@@ -216,15 +210,15 @@ mod tests {
         let mut p = PageBudgets::new();
         let a = p.register((1000, 400));
         let b = p.register((1000, 400));
-        let _ = p.update(a, 0.0, demand(3000, 0, 0));
-        let _ = p.update(b, 0.0, demand(3000, 0, 0));
-        let (sa, _) = p.update(a, 0.0, demand(3000, 0, 0));
+        let _ = p.update(a, 0.0, D::new(3000, 0, 0));
+        let _ = p.update(b, 0.0, D::new(3000, 0, 0));
+        let (sa, _) = p.update(a, 0.0, D::new(3000, 0, 0));
         assert_eq!(sa, 500);
         p.unregister(b);
         assert_eq!(p.len(), 1);
-        assert_eq!(p.update(a, 0.1, demand(3000, 0, 0)), (1000, 400));
+        assert_eq!(p.update(a, 0.1, D::new(3000, 0, 0)), (1000, 400));
         // An unknown model gets nothing.
-        assert_eq!(p.update(b, 0.2, demand(3000, 0, 0)), (0, 0));
+        assert_eq!(p.update(b, 0.2, D::new(3000, 0, 0)), (0, 0));
     }
 
     #[test]
@@ -233,11 +227,11 @@ mod tests {
         {
             let b = Registration::new((1000, 400));
             assert_eq!(a.page_models(), 2);
-            let _ = a.update(0.0, demand(3000, 0, 0));
-            let _ = b.update(0.0, demand(1000, 0, 0));
-            assert_eq!(a.update(0.0, demand(3000, 0, 0)).0, 750);
+            let _ = a.update(0.0, D::new(3000, 0, 0));
+            let _ = b.update(0.0, D::new(1000, 0, 0));
+            assert_eq!(a.update(0.0, D::new(3000, 0, 0)).0, 750);
         }
         assert_eq!(a.page_models(), 1);
-        assert_eq!(a.update(0.1, demand(3000, 0, 0)), (1000, 400));
+        assert_eq!(a.update(0.1, D::new(3000, 0, 0)), (1000, 400));
     }
 }

@@ -772,15 +772,7 @@ impl Streamed {
     /// What the model asks of the page's budgets: its last frame's (nothing while
     /// hidden).
     fn demand(&self) -> ModelDemand {
-        ModelDemand {
-            wanted_bytes: if self.hidden {
-                0
-            } else {
-                self.stats.wanted_bytes
-            },
-            pinned_bytes: self.scheduler.pinned_bytes(),
-            resident_bytes: self.scheduler.resident_bytes(),
-        }
+        ModelDemand::of(&self.scheduler, self.stats.wanted_bytes, !self.hidden)
     }
 
     /// Whether the page's split has moved this model's budgets since its last frame
