@@ -322,6 +322,25 @@ fn codecs() -> Vec<Codec> {
         ispc_bc7(bc7::opaque_fast_settings),
     ));
     v.push(block_codec(
+        "bc7 ispc very_fast +zstd9",
+        GpuFormat::Bc7,
+        Some(9),
+        ispc_bc7(bc7::opaque_very_fast_settings),
+    ));
+    v.push(block_codec(
+        "bc7 ispc fast +zstd9",
+        GpuFormat::Bc7,
+        Some(9),
+        ispc_bc7(bc7::opaque_fast_settings),
+    ));
+    v.push(block_codec(
+        "bc7 ispc ultra_fast +zstd9",
+        GpuFormat::Bc7,
+        Some(9),
+        ispc_bc7(bc7::opaque_ultra_fast_settings),
+    ));
+
+    v.push(block_codec(
         "bc7 ispc basic",
         GpuFormat::Bc7,
         None,

@@ -745,6 +745,7 @@ fn finalize(
     };
     let header = Header {
         attributes: ctx.attributes,
+        texture_codec: ctx.baker.as_ref().map_or(0, |b| b.codec() as u32),
         quant_bits: grid.bits,
         input_vertices: ctx.imp.vertex_count,
         input_triangles: ctx.imp.face_count,

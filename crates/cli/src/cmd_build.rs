@@ -50,9 +50,11 @@ pub struct Args {
     /// Ignore the input's textures (faces in their material's colour).
     #[arg(long)]
     ignore_textures: bool,
-    /// How patch textures are stored: png (lossless: the finest patches keep the source
-    /// texels exactly) or jpeg.
-    #[arg(long, default_value = "png", value_parser = ["png", "jpeg"])]
+    /// How patch textures are stored: bc7 (GPU block compression with its mips stored:
+    /// a quarter of RGBA8's GPU memory, no image decode at load, within BC7's error of
+    /// the source), png (lossless: the finest patches keep the source texels exactly,
+    /// decoded and mipmapped at load) or jpeg (the smallest files).
+    #[arg(long, default_value = "bc7", value_parser = ["bc7", "png", "jpeg"])]
     texture_codec: String,
     /// JPEG quality of patch textures (1..=100).
     #[arg(long, default_value_t = 90, value_parser = clap::value_parser!(u8).range(1..=100))]
@@ -78,10 +80,10 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         ignore_colors: a.ignore_colors,
         ignore_textures: a.ignore_textures,
         texture: tessera_build::texture::TextureOptions {
-            codec: if a.texture_codec == "jpeg" {
-                tessera_format::TextureCodec::Jpeg
-            } else {
-                tessera_format::TextureCodec::Png
+            codec: match a.texture_codec.as_str() {
+                "jpeg" => tessera_format::TextureCodec::Jpeg,
+                "png" => tessera_format::TextureCodec::Png,
+                _ => tessera_format::TextureCodec::Bc7,
             },
             quality: a.texture_quality,
         },

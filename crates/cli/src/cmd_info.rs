@@ -92,6 +92,7 @@ pub fn info_json(m: &ModelIndex, file: &str) -> serde_json::Value {
         "bytes_per_input_triangle": h.file_bytes as f64 / h.input_triangles.max(1) as f64,
         "builder": { "leaf_triangles_max": h.leaf_triangles_max, "node_triangles_target": h.node_triangles_target },
         "textures": (h.attributes & ATTR_TEXTURE != 0).then(|| json!({
+            "codec": h.patch_texture_codec().map(|c| c.name()),
             "texels": texels,
             "leaf_texels": leaf_texels,
             "largest": largest,
@@ -202,7 +203,8 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     );
     if let Some(t) = j["textures"].as_object() {
         println!(
-            "  textures        {:.2} Mtexels in patch textures ({:.2} M in leaves), largest {}x{}, {:.0} texels/patch{}",
+            "  textures        {} {:.2} Mtexels in patch textures ({:.2} M in leaves), largest {}x{}, {:.0} texels/patch{}",
+            t["codec"].as_str().unwrap_or("?"),
             t["texels"].as_f64().unwrap_or(0.0) / 1e6,
             t["leaf_texels"].as_f64().unwrap_or(0.0) / 1e6,
             t["largest"][0],

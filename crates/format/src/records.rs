@@ -7,7 +7,7 @@ use bytemuck::{Pod, Zeroable};
 /// First 8 bytes of every model file.
 pub const MAGIC: [u8; 8] = *b"TESSERA\0";
 /// The version this code writes. Readers refuse files with a newer version.
-pub const FORMAT_VERSION: u32 = 3;
+pub const FORMAT_VERSION: u32 = 4;
 /// `Header::attributes` bit: patches carry per-vertex normals.
 pub const ATTR_NORMALS: u32 = 1;
 /// `Header::attributes` bit: patches carry per-vertex RGBA8 colours.
@@ -82,8 +82,25 @@ pub struct Header {
     pub page_nodes: u32,
     /// Number of index pages: `node_count` / `page_nodes`, rounded up.
     pub page_count: u32,
+    /// The codec of every patch texture (`TextureCodec` as a number: 1 PNG, 2 JPEG,
+    /// 3 BC7) in models with [`ATTR_TEXTURE`], 0 otherwise: readers know a texture's
+    /// GPU bytes before they read it (since version 4).
+    pub texture_codec: u32,
     /// Zero.
-    pub reserved: [u32; 19],
+    pub reserved: [u32; 18],
+}
+
+impl Header {
+    /// The codec of the model's patch textures ([`Header::texture_codec`]); `None`
+    /// for a model without [`ATTR_TEXTURE`] or an unknown value.
+    pub fn patch_texture_codec(&self) -> Option<crate::TextureCodec> {
+        if self.attributes & ATTR_TEXTURE == 0 {
+            return None;
+        }
+        u8::try_from(self.texture_codec)
+            .ok()
+            .and_then(crate::TextureCodec::from_byte)
+    }
 }
 
 /// One tetrahedron of the forest and its patch, as the reader holds it in memory (128

@@ -3,7 +3,7 @@
 //! links, vertices inside their bounds). `Model::open` only checks what is cheap;
 //! this is what `tessera verify` and the builder's tests run.
 
-use crate::codec::PatchData;
+use crate::codec::{PatchData, TextureCodec};
 use crate::grid::Grid;
 use crate::index::{ByteSource, ModelIndex};
 #[cfg(feature = "mmap")]
@@ -75,6 +75,21 @@ pub fn verify_index<S: ByteSource + ?Sized>(index: &ModelIndex, source: &S) -> V
     let mut diamonds: std::collections::HashMap<u32, usize> = Default::default();
     if h.reserved.iter().any(|&v| v != 0) {
         r.problem("header: reserved fields are not zero".into());
+    }
+    let textured = h.attributes & ATTR_TEXTURE != 0;
+    let codec = u8::try_from(h.texture_codec)
+        .ok()
+        .and_then(TextureCodec::from_byte);
+    if textured && codec.is_none() {
+        r.problem(format!(
+            "header: texture codec {} in a textured model",
+            h.texture_codec
+        ));
+    } else if !textured && h.texture_codec != 0 {
+        r.problem(format!(
+            "header: texture codec {} in a model without textures",
+            h.texture_codec
+        ));
     }
     if h.leaf_triangles_max == 0 {
         r.problem("header: leaf_triangles_max is 0".into());
@@ -219,7 +234,15 @@ pub fn verify_index<S: ByteSource + ?Sized>(index: &ModelIndex, source: &S) -> V
 
         // The patch itself.
         match index.read_patch(source, i) {
-            Ok(patch) => check_patch(&mut r, i, n, &patch, &bounds),
+            Ok(patch) => {
+                check_patch(&mut r, i, n, &patch, &bounds);
+                if let Some(t) = patch.texture.as_ref().filter(|t| t.codec != codec) {
+                    r.problem(format!(
+                        "node {i}: texture codec {:?}, the header says {:?}",
+                        t.codec, codec
+                    ));
+                }
+            }
             Err(e) => r.problem(format!("node {i}: {e}")),
         }
     }

@@ -232,7 +232,7 @@ pub fn encode_index(
     h.patch_data_offset = at;
     h.patch_data_bytes = rel;
     h.file_bytes = at + rel;
-    h.reserved = [0; 19];
+    h.reserved = [0; 18];
     h.block_table_crc32 = crc32fast::hash(&index);
     h.header_crc32 = header_crc32(&h);
     index.extend_from_slice(directory_bytes);

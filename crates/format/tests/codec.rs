@@ -765,3 +765,67 @@ fn textured_patches_round_trip_and_damage_is_an_error() {
         }
     }
 }
+
+/// BC7 blocks of a whole 24x16 chain (every level, level 0 first), deterministic bytes
+/// (any 16 bytes are a block a decoder takes: the test is of the container, not of the
+/// encoder, which is the builder's).
+fn bc7_levels(w: u32, h: u32) -> Vec<Vec<u8>> {
+    (0..texels::mip_level_count(w, h))
+        .map(|l| {
+            let (lw, lh) = texels::level_size(w, h, l);
+            (0..texels::bc7_level_bytes(lw, lh))
+                .map(|i| (i * 37 + l as usize * 11) as u8 | 0x40)
+                .collect()
+        })
+        .collect()
+}
+
+#[test]
+fn bc7_patch_textures_round_trip_as_blocks_and_decode_to_texels() {
+    let attrs = ATTR_NORMALS | ATTR_UVS | ATTR_TEXTURE;
+    let mut p = textured_patch(TextureCodec::Png);
+    p.normals = vec![[0.0, 0.0, 1.0]; 30];
+    let levels = bc7_levels(24, 16);
+    p.texture = Some(PatchTexture::from_bc7(24, 16, levels.clone()).unwrap());
+    let qmin = quant_min(&p);
+    let bytes = encode_patch(&p, attrs, qmin);
+    let sh = PatchShape {
+        texture_size: [24, 16],
+        ..shape(qmin, 30, p.triangle_count() as u32)
+    };
+    // Decoding keeps the blocks as stored: what the GPU takes.
+    let back = decode_patch(&bytes, attrs, sh).unwrap();
+    let t = back.texture.clone().unwrap();
+    assert_eq!(t.codec, Some(TextureCodec::Bc7));
+    assert_eq!(t.blocks, levels);
+    assert!(t.rgba.is_empty() && t.encoded.is_empty());
+    // Texels for readers without BC7: level 0 and the stored levels below it.
+    let mut d = t.clone();
+    d.decode_rgba().unwrap();
+    assert_eq!(d.rgba, texels::bc7_to_rgba(&levels[0], 24, 16));
+    assert_eq!(d.mips.len(), levels.len() - 1);
+    assert_eq!(d.mips[0], texels::bc7_to_rgba(&levels[1], 12, 8));
+    assert_eq!(d.mips.last().unwrap().len(), 4);
+    // Sizes that are not whole blocks, and chains that are not whole, are refused.
+    assert!(PatchTexture::from_bc7(22, 16, bc7_levels(22, 16)).is_err());
+    assert!(PatchTexture::from_bc7(24, 16, levels[..3].to_vec()).is_err());
+    // Damage: a zstd frame of the wrong length, or not zstd at all.
+    let tex_at = bytes.len() - p.texture.as_ref().unwrap().encoded.len();
+    let mut bad = bytes.clone();
+    for b in &mut bad[tex_at..] {
+        *b = 0x5A;
+    }
+    let e = decode_patch(&bad, attrs, sh).unwrap_err();
+    assert!(e.to_string().contains("zstd"), "{e}");
+    let short = PatchTexture::from_bc7(24, 16, levels.clone()).unwrap();
+    let mut t = PatchTexture {
+        encoded: zstd::bulk::compress(&levels.concat()[16..], 3).unwrap(),
+        blocks: Vec::new(),
+        ..short
+    };
+    let e = t.decode_blocks().unwrap_err();
+    assert!(
+        e.to_string().contains("BC7") || e.to_string().contains("zstd"),
+        "{e}"
+    );
+}

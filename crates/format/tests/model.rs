@@ -203,8 +203,8 @@ fn corruption_is_detected() {
         matches!(
             e,
             FormatError::UnsupportedVersion {
-                found: 4,
-                supported: 3
+                found: 5,
+                supported: 4
             }
         ),
         "{e}"
@@ -228,12 +228,28 @@ fn corruption_is_detected() {
             e,
             FormatError::OldVersion {
                 found: 1,
-                supported: 3
+                supported: 4
             }
         ),
         "{e}"
     );
     assert!(e.to_string().contains("rebuild"), "{e}");
+    // Version 3 (no header texture codec, no BC7) too.
+    let mut hh = h;
+    hh.version = 3;
+    hh.header_crc32 = header_crc32(&hh);
+    b[..256].copy_from_slice(bytemuck::bytes_of(&hh));
+    let e = f.open_bytes("ver3", &b).unwrap_err();
+    assert!(
+        matches!(
+            e,
+            FormatError::OldVersion {
+                found: 3,
+                supported: 4
+            }
+        ) && e.to_string().contains("rebuild"),
+        "{e}"
+    );
 
     // Truncations.
     for cut in [0, 7, 8, 100, 255, 256, 300, good.len() - 1] {
@@ -399,7 +415,8 @@ fn documented_offsets() {
     assert_eq!(offset_of!(Header, header_crc32), 168);
     assert_eq!(offset_of!(Header, page_nodes), 172);
     assert_eq!(offset_of!(Header, page_count), 176);
-    assert_eq!(offset_of!(Header, reserved), 180);
+    assert_eq!(offset_of!(Header, texture_codec), 180);
+    assert_eq!(offset_of!(Header, reserved), 184);
     assert_eq!(offset_of!(PageEntry, bytes), 8);
     assert_eq!(offset_of!(PageEntry, crc32), 12);
     assert_eq!(offset_of!(NodeRecord, patch_bytes), 16);

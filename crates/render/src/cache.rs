@@ -29,10 +29,13 @@ use std::ops::Range;
 
 use range_alloc::RangeAllocator;
 use rustc_hash::FxHashMap;
-use tessera_format::{PatchData, TextureChart};
+use tessera_format::{texels, PatchData, TextureChart, TextureCodec};
 use tessera_stream::{ResidentStore, StoreError};
 
-use crate::texture::{texture_gpu_bytes, SlotTexture, TextureKit};
+use crate::texture::{
+    bc7_uploads_as_blocks, level_size, texture_gpu_bytes, texture_gpu_bytes_as, SlotTexture,
+    TextureKit,
+};
 
 /// One vertex as the shader reads it, 40 bytes: the vertex and its morph target (the
 /// position and attributes it takes in its parent's shape, see `tessera_select::morph`).
@@ -362,6 +365,12 @@ pub struct GpuCache {
     parents: Vec<Vec<(u32, f32)>>,
     /// Per model: whether it is textured ([`GpuCache::set_textured`]).
     textured: Vec<bool>,
+    /// Per model: its header's texture codec ([`GpuCache::set_texture_codec`]), for the
+    /// GPU bytes of textures not read yet.
+    codecs: Vec<Option<TextureCodec>>,
+    /// Whether the device samples BC7 (`TEXTURE_COMPRESSION_BC`): BC7 patch textures
+    /// are uploaded as blocks, else decoded to RGBA8.
+    bc7: bool,
     /// The texture layout, sampler and grey stand-in, made at the first textured upload.
     kit: Option<TextureKit>,
     /// Bytes the vertex and index buffers and the textures may take together: the
@@ -396,8 +405,16 @@ const INITIAL_BUFFER_BYTES: u64 = 8 << 20;
 /// draw the same either way; a small budget's buffers just grow on demand.)
 const INITIAL_SHARE: u32 = 8;
 
-/// A patch texture's texels: width, height, RGBA8, the mips made ahead (or none).
-type TexelsRef<'p> = (u32, u32, &'p [u8], &'p [Vec<u8>]);
+/// A patch texture's texels as they go to the GPU.
+enum TexelsRef<'p> {
+    /// Width, height, RGBA8, the mips made ahead (or none).
+    Rgba(u32, u32, &'p [u8], &'p [Vec<u8>]),
+    /// Width, height and the BC7 blocks of every level, uploaded as blocks.
+    Bc7(u32, u32, &'p [Vec<u8>]),
+    /// Width, height and BC7 blocks the device cannot sample: decoded to RGBA8 (every
+    /// stored level) at upload.
+    Bc7Decoded(u32, u32, &'p [Vec<u8>]),
+}
 
 /// One growable GPU buffer carved into element ranges (vertices or indices).
 struct Pool {
@@ -534,6 +551,10 @@ impl GpuCache {
             levels: Vec::new(),
             parents: Vec::new(),
             textured: Vec::new(),
+            codecs: Vec::new(),
+            bc7: device
+                .features()
+                .contains(wgpu::Features::TEXTURE_COMPRESSION_BC),
             kit: None,
             total: 0,
             max_texture_dim: device.limits().max_texture_dimension_2d,
@@ -558,6 +579,26 @@ impl GpuCache {
         self.textured[m] = textured;
     }
 
+    /// Records `model`'s texture codec (its header's `texture_codec`): the GPU bytes of
+    /// its textures before they are read ([`GpuCache::texture_bytes_for`]) depend on it.
+    pub fn set_texture_codec(&mut self, model: u32, codec: Option<TextureCodec>) {
+        let m = model as usize;
+        if self.codecs.len() <= m {
+            self.codecs.resize(m + 1, None);
+        }
+        self.codecs[m] = codec;
+    }
+
+    /// Whether the device samples BC7 textures (`TEXTURE_COMPRESSION_BC`).
+    pub fn samples_bc7(&self) -> bool {
+        self.bc7
+    }
+
+    /// Whether a BC7 texture of `width` x `height` goes to this device as blocks.
+    fn bc7_as_blocks(&self, width: u32, height: u32) -> bool {
+        self.bc7 && bc7_uploads_as_blocks(width, height, self.max_texture_dim)
+    }
+
     /// Whether `patch` of `model` is uploaded (and drawn) textured.
     fn uploads_textured(&self, model: u32, patch: &PatchData) -> bool {
         self.textured.get(model as usize).copied().unwrap_or(false) || patch_is_textured(patch)
@@ -576,7 +617,20 @@ impl GpuCache {
                     && t.rgba.len() as u64 == 4 * u64::from(t.width) * u64::from(t.height) =>
             {
                 let bytes = texture_gpu_bytes(t.width, t.height, self.max_texture_dim);
-                (bytes, Some((t.width, t.height, &t.rgba[..], &t.mips[..])))
+                (
+                    bytes,
+                    Some(TexelsRef::Rgba(t.width, t.height, &t.rgba[..], &t.mips[..])),
+                )
+            }
+            Some(t) if t.width > 0 && t.height > 0 && !t.blocks.is_empty() => {
+                let blocks = self.bc7_as_blocks(t.width, t.height);
+                let bytes = texture_gpu_bytes_as(t.width, t.height, self.max_texture_dim, blocks);
+                let texels = if blocks {
+                    TexelsRef::Bc7(t.width, t.height, &t.blocks[..])
+                } else {
+                    TexelsRef::Bc7Decoded(t.width, t.height, &t.blocks[..])
+                };
+                (bytes, Some(texels))
             }
             _ => (0, None),
         }
@@ -590,9 +644,12 @@ impl GpuCache {
             + self.texture_plan(model, patch).0
     }
 
-    /// GPU bytes a patch texture of `size` texels takes on this device (mips included).
-    pub fn texture_bytes_for(&self, size: [u16; 2]) -> u64 {
-        texture_gpu_bytes(u32::from(size[0]), u32::from(size[1]), self.max_texture_dim)
+    /// GPU bytes a patch texture of `size` texels of `model` takes on this device (mips
+    /// included), by the model's texture codec.
+    pub fn texture_bytes_for(&self, model: u32, size: [u16; 2]) -> u64 {
+        let (w, h) = (u32::from(size[0]), u32::from(size[1]));
+        let bc7 = self.codecs.get(model as usize).copied().flatten() == Some(TextureCodec::Bc7);
+        texture_gpu_bytes_as(w, h, self.max_texture_dim, bc7 && self.bc7_as_blocks(w, h))
     }
 
     /// The bind group layout of the patch textures (group 1 of the textured pipeline),
@@ -920,9 +977,22 @@ impl GpuCache {
             let kit = self
                 .kit
                 .get_or_insert_with(|| TextureKit::new(device, queue));
+            let max = self.max_texture_dim;
             Some(match texels {
-                Some((w, h, rgba, mips)) => {
-                    kit.upload(device, queue, w, h, rgba, mips, self.max_texture_dim)
+                Some(TexelsRef::Rgba(w, h, rgba, mips)) => {
+                    kit.upload(device, queue, w, h, rgba, mips, max)
+                }
+                Some(TexelsRef::Bc7(w, h, blocks)) => {
+                    kit.upload_bc7(device, queue, w, h, blocks, max)
+                }
+                Some(TexelsRef::Bc7Decoded(w, h, blocks)) => {
+                    let mut levels = blocks.iter().enumerate().map(|(l, b)| {
+                        let (lw, lh) = level_size(w, h, l as u32);
+                        texels::bc7_to_rgba(b, lw, lh)
+                    });
+                    let rgba = levels.next().unwrap_or_default();
+                    let mips: Vec<Vec<u8>> = levels.collect();
+                    kit.upload(device, queue, w, h, &rgba, &mips, max)
                 }
                 None => kit.grey(),
             })
@@ -1098,7 +1168,7 @@ impl ResidentStore for GpuStore<'_> {
         u64::from(vertices) * VERTEX_BYTES + u64::from(triangles) * 3 * INDEX_BYTES
     }
     fn estimate_texture_bytes(&self, size: [u16; 2]) -> u64 {
-        self.cache.texture_bytes_for(size)
+        self.cache.texture_bytes_for(self.model, size)
     }
     fn has_room(&self, patches: &[&PatchData]) -> bool {
         let nv = patches.iter().map(|p| p.positions.len() as u64).sum();

@@ -95,8 +95,16 @@ impl Gpu {
                 }),
             ..limits
         };
-        // Lines for the wireframe overlay, where the adapter has them.
-        let features = adapter.features() & wgpu::Features::POLYGON_MODE_LINE;
+        // Lines for the wireframe overlay, and BC texture sampling (BC7 patch textures
+        // go to the GPU as blocks), where the adapter has them. `TESSERA_TEXTURE_BLOCKS=0`
+        // leaves BC out, so BC7 textures are decoded to RGBA8 as on a device without it
+        // (to compare the two; lavapipe, desktop GPUs and Chromium's WebGL2 on desktops
+        // have it, phones mostly do not).
+        let mut wanted = wgpu::Features::POLYGON_MODE_LINE;
+        if std::env::var("TESSERA_TEXTURE_BLOCKS").map_or(true, |v| v != "0") {
+            wanted |= wgpu::Features::TEXTURE_COMPRESSION_BC;
+        }
+        let features = adapter.features() & wanted;
         let (device, queue) = adapter
             .request_device(&wgpu::DeviceDescriptor {
                 label: Some("tessera device"),

@@ -40,8 +40,8 @@ pub use renderer::{
 pub use tessera_image::{diff_stats, enclosed_background_pixels, psnr, Image, ImageError};
 pub use tessera_stream::{FrameStats, Mode, MorphOptions};
 pub use texture::{
-    downsample, mip_chain, mip_level_count, texture_bind_group_layout, texture_gpu_bytes,
-    SlotTexture, PATCH_TEXTURE_FORMAT,
+    bc7_uploads_as_blocks, downsample, mip_chain, mip_level_count, texture_bind_group_layout,
+    texture_gpu_bytes, texture_gpu_bytes_as, SlotTexture, BC7_TEXTURE_FORMAT, PATCH_TEXTURE_FORMAT,
 };
 #[cfg(feature = "native")]
 pub use viewer::{Viewer, ViewerOptions};

@@ -1,6 +1,8 @@
 //! Patch textures on the GPU (models with `ATTR_TEXTURE`): one wgpu texture per
-//! resident patch, with a full mip chain made on the CPU at upload, sampled through
-//! bind group 1 of the textured pipeline.
+//! resident patch, sampled through bind group 1 of the textured pipeline. BC7 textures
+//! go up as their stored blocks and mips ([`BC7_TEXTURE_FORMAT`]) where the device has
+//! `TEXTURE_COMPRESSION_BC`, else decoded to RGBA8 with their stored mips; PNG and JPEG
+//! textures as RGBA8 with a full mip chain made on the CPU at upload.
 //!
 //! Format: `Rgba8Unorm`, not the sRGB variant. The texels are sRGB-encoded like vertex
 //! colours, and the untextured path treats vertex colours as plain values (Unorm8x4
@@ -18,16 +20,12 @@
 /// Format of every patch texture (see the module docs for why not sRGB).
 pub const PATCH_TEXTURE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 
-/// Number of levels of a full mip chain of a `width` x `height` texture (down to 1x1).
-pub fn mip_level_count(width: u32, height: u32) -> u32 {
-    32 - width.max(height).max(1).leading_zeros()
-}
+use tessera_format::texels::bc7_level_bytes;
+pub use tessera_format::texels::{downsample, level_size, mip_chain, mip_level_count};
 
-/// Size of mip `level` of a `width` x `height` texture.
-#[inline]
-fn level_size(width: u32, height: u32, level: u32) -> (u32, u32) {
-    ((width >> level).max(1), (height >> level).max(1))
-}
+/// Format of BC7 patch textures (`TextureCodec::Bc7`), Unorm like
+/// [`PATCH_TEXTURE_FORMAT`] and for the same reason.
+pub const BC7_TEXTURE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Bc7RgbaUnorm;
 
 /// The first mip level of a `width` x `height` texture whose size fits `max_dim`.
 fn first_level(width: u32, height: u32, max_dim: u32) -> u32 {
@@ -43,82 +41,33 @@ fn first_level(width: u32, height: u32, max_dim: u32) -> u32 {
 /// `4 * width * height`), as uploaded to a device whose largest texture is `max_dim`
 /// texels (the levels above it are not uploaded). 0 when either size is 0 (no texture).
 pub fn texture_gpu_bytes(width: u32, height: u32, max_dim: u32) -> u64 {
+    texture_gpu_bytes_as(width, height, max_dim, false)
+}
+
+/// [`texture_gpu_bytes`] of a texture uploaded as BC7 blocks (`bc7`: 1 byte a texel,
+/// whole 4x4 blocks) or as RGBA8.
+pub fn texture_gpu_bytes_as(width: u32, height: u32, max_dim: u32, bc7: bool) -> u64 {
     if width == 0 || height == 0 {
         return 0;
     }
     (first_level(width, height, max_dim)..mip_level_count(width, height))
         .map(|l| {
             let (w, h) = level_size(width, height, l);
-            4 * u64::from(w) * u64::from(h)
+            if bc7 {
+                bc7_level_bytes(w, h) as u64
+            } else {
+                4 * u64::from(w) * u64::from(h)
+            }
         })
         .sum()
 }
 
-/// Per destination texel along one axis (`n` source texels onto `m`): the first source
-/// texel and the weights of it and the following ones (the exact overlap of the
-/// destination texel's footprint with each source texel, summing to 1).
-fn axis_weights(n: u32, m: u32) -> Vec<(usize, Vec<f32>)> {
-    let s = f64::from(n) / f64::from(m);
-    (0..m)
-        .map(|x| {
-            let (a, b) = (f64::from(x) * s, f64::from(x + 1) * s);
-            let i0 = a.floor() as usize;
-            let i1 = (b.ceil() as usize).min(n as usize).max(i0 + 1);
-            let w = (i0..i1)
-                .map(|i| ((b.min(i as f64 + 1.0) - a.max(i as f64)) / s) as f32)
-                .collect();
-            (i0, w)
-        })
-        .collect()
-}
-
-/// The next mip level of `src` (`w` x `h` RGBA8, rows top to bottom): half the size
-/// (rounded down, at least 1), each texel the area-weighted mean of the source texels
-/// its footprint covers (a box filter; odd sizes weigh the shared texels by their
-/// overlap).
-pub fn downsample(src: &[u8], w: u32, h: u32) -> (Vec<u8>, u32, u32) {
-    let (dw, dh) = ((w / 2).max(1), (h / 2).max(1));
-    let xs = axis_weights(w, dw);
-    let ys = axis_weights(h, dh);
-    let row_bytes = 4 * w as usize;
-    let mut out = Vec::with_capacity(4 * dw as usize * dh as usize);
-    let mut acc = vec![0f32; 4 * dw as usize];
-    let mut filtered = vec![0f32; 4 * dw as usize];
-    for (y0, wy) in &ys {
-        acc.iter_mut().for_each(|a| *a = 0.0);
-        for (dy, &fy) in wy.iter().enumerate() {
-            let row = &src[(y0 + dy) * row_bytes..(y0 + dy + 1) * row_bytes];
-            for (d, (x0, wx)) in xs.iter().enumerate() {
-                let mut px = [0f32; 4];
-                for (dx, &fx) in wx.iter().enumerate() {
-                    let s = &row[4 * (x0 + dx)..4 * (x0 + dx) + 4];
-                    for c in 0..4 {
-                        px[c] += fx * f32::from(s[c]);
-                    }
-                }
-                filtered[4 * d..4 * d + 4].copy_from_slice(&px);
-            }
-            for (a, f) in acc.iter_mut().zip(&filtered) {
-                *a += fy * f;
-            }
-        }
-        out.extend(acc.iter().map(|&v| (v + 0.5).clamp(0.0, 255.0) as u8));
-    }
-    (out, dw, dh)
-}
-
-/// Mip levels 1, 2, .. (down to 1x1) of `rgba` (`width` x `height`), each
-/// [`downsample`] of the last: what [`TextureKit::upload`] makes when it is not given
-/// them.
-pub fn mip_chain(rgba: &[u8], width: u32, height: u32) -> Vec<Vec<u8>> {
-    let mut out: Vec<Vec<u8>> = Vec::new();
-    let (mut w, mut h) = (width, height);
-    for _ in 1..mip_level_count(width, height) {
-        let (next, nw, nh) = downsample(out.last().map_or(rgba, |v| &v[..]), w, h);
-        out.push(next);
-        (w, h) = (nw, nh);
-    }
-    out
+/// Whether a `width` x `height` BC7 texture can be uploaded as blocks to a device
+/// whose largest texture is `max_dim`: the first level that fits has whole blocks
+/// (level 0 always has; a texture above the device's limit starts lower).
+pub fn bc7_uploads_as_blocks(width: u32, height: u32, max_dim: u32) -> bool {
+    let (w, h) = level_size(width, height, first_level(width, height, max_dim));
+    w % 4 == 0 && h % 4 == 0
 }
 
 /// Whether `mips` are the whole chain below a `width` x `height` level 0, each of its
@@ -209,7 +158,13 @@ impl TextureKit {
         self.grey.clone().expect("made with the kit")
     }
 
-    fn create(device: &wgpu::Device, width: u32, height: u32, levels: u32) -> wgpu::Texture {
+    fn create(
+        device: &wgpu::Device,
+        width: u32,
+        height: u32,
+        levels: u32,
+        format: wgpu::TextureFormat,
+    ) -> wgpu::Texture {
         device.create_texture(&wgpu::TextureDescriptor {
             label: Some("tessera patch texture"),
             size: wgpu::Extent3d {
@@ -220,7 +175,7 @@ impl TextureKit {
             mip_level_count: levels,
             sample_count: 1,
             dimension: wgpu::TextureDimension::D2,
-            format: PATCH_TEXTURE_FORMAT,
+            format,
             usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
             view_formats: &[],
         })
@@ -244,7 +199,7 @@ impl TextureKit {
         let first = first_level(width, height, max_dim);
         let levels = mip_level_count(width, height);
         let (w0, h0) = level_size(width, height, first);
-        let texture = Self::create(device, w0, h0, levels - first);
+        let texture = Self::create(device, w0, h0, levels - first, PATCH_TEXTURE_FORMAT);
         let made = mips_fit(width, height, mips);
         let mut level: std::borrow::Cow<[u8]> = std::borrow::Cow::Borrowed(rgba);
         let (mut w, mut h) = (width, height);
@@ -283,6 +238,58 @@ impl TextureKit {
             );
             bytes += 4 * u64::from(w) * u64::from(h);
         }
+        self.bind(device, texture, bytes)
+    }
+
+    /// Uploads a BC7 texture's `blocks` (every level, level 0 first) from the first
+    /// level that fits `max_dim`, as blocks: the device has BC sampling, and that level
+    /// has whole blocks ([`bc7_uploads_as_blocks`]).
+    pub fn upload_bc7(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        width: u32,
+        height: u32,
+        blocks: &[Vec<u8>],
+        max_dim: u32,
+    ) -> SlotTexture {
+        let first = first_level(width, height, max_dim);
+        let levels = mip_level_count(width, height);
+        let (w0, h0) = level_size(width, height, first);
+        let texture = Self::create(device, w0, h0, levels - first, BC7_TEXTURE_FORMAT);
+        let mut bytes = 0;
+        for l in first..levels {
+            let (w, h) = level_size(width, height, l);
+            // Whole blocks: a level smaller than a block is stored (and copied) as one.
+            let (bw, bh) = (w.div_ceil(4), h.div_ceil(4));
+            let data = &blocks[l as usize];
+            debug_assert_eq!(data.len(), bc7_level_bytes(w, h));
+            queue.write_texture(
+                wgpu::TexelCopyTextureInfo {
+                    texture: &texture,
+                    mip_level: l - first,
+                    origin: wgpu::Origin3d::ZERO,
+                    aspect: wgpu::TextureAspect::All,
+                },
+                data,
+                wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(16 * bw),
+                    rows_per_image: Some(bh),
+                },
+                wgpu::Extent3d {
+                    width: 4 * bw,
+                    height: 4 * bh,
+                    depth_or_array_layers: 1,
+                },
+            );
+            bytes += data.len() as u64;
+        }
+        self.bind(device, texture, bytes)
+    }
+
+    /// The slot texture of `texture` (`bytes` on the GPU): its view and bind group.
+    fn bind(&self, device: &wgpu::Device, texture: wgpu::Texture, bytes: u64) -> SlotTexture {
         let view = texture.create_view(&wgpu::TextureViewDescriptor {
             label: Some("tessera patch texture view"),
             ..Default::default()

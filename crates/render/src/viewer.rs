@@ -225,6 +225,8 @@ impl Viewer {
             v.cache.set_nodes(i as u32, v.models[i].index());
             let textured = v.models[i].index().header().attributes & ATTR_TEXTURE != 0;
             v.cache.set_textured(i as u32, textured);
+            v.cache
+                .set_texture_codec(i as u32, v.models[i].index().header().patch_texture_codec());
             let (m, mut store) = v.parts(i);
             m.scheduler.load_roots(&mut m.pager, &mut store);
         }

@@ -142,6 +142,20 @@ pub fn write_cut_gltf(
                     )
                 };
                 let t = p.texture.as_ref().ok_or_else(|| bad("has no texture"))?;
+                // BC7 textures come decoded as blocks: their texels for the PNG.
+                let decoded;
+                let t = if t.rgba.is_empty() && !t.blocks.is_empty() {
+                    let mut d = PatchTexture {
+                        rgba: Vec::new(),
+                        mips: Vec::new(),
+                        ..t.clone()
+                    };
+                    d.decode_rgba().map_err(|e| e.with_node(node))?;
+                    decoded = d;
+                    &decoded
+                } else {
+                    t
+                };
                 let texels = 4 * t.width as usize * t.height as usize;
                 if t.rgba.len() != texels || texels == 0 {
                     return Err(bad("has no decoded texels"));
@@ -577,7 +591,7 @@ mod tests {
                 codec: None,
                 encoded: Vec::new(),
                 rgba: vec![shade, 0, 0, 255, 0, shade, 0, 255],
-                mips: Vec::new(),
+                ..Default::default()
             }),
             ..PatchData::default()
         };

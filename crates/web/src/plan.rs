@@ -389,6 +389,7 @@ impl Fetcher {
         max_jobs: usize,
         max_bytes: u64,
         mips: bool,
+        blocks: bool,
     ) -> Vec<(u32, Vec<u8>)> {
         let mut out = Vec::new();
         while self.at_workers < max_jobs {
@@ -398,7 +399,7 @@ impl Fetcher {
                 break;
             }
             let f = self.ready.pop_front().expect("front checked");
-            match crate::wire::Job::of(&self.index, f.node, mips) {
+            match crate::wire::Job::of(&self.index, f.node, mips, blocks) {
                 Ok(job) => {
                     self.at_workers += 1;
                     self.at_workers_bytes += cost;

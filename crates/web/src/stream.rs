@@ -17,7 +17,7 @@ use std::sync::Arc;
 use glam::DVec3;
 use rustc_hash::FxHashMap;
 use serde_json::json;
-use tessera_format::{Grid, PatchData, ATTR_COLORS, ATTR_TEXTURE};
+use tessera_format::{Grid, PatchData, PatchTexture, ATTR_COLORS, ATTR_TEXTURE};
 use tessera_nav::Navigator;
 use tessera_select::Camera;
 use tessera_stream::{ResidentStore, StoreError};
@@ -187,9 +187,23 @@ impl KeptStore {
                 }
             }
         }
-        let texture = patch
+        // A BC7 texture decoded on this thread (no decode workers) comes as blocks:
+        // three.js gets RGBA8 texels (every stored level).
+        let decoded = patch
             .texture
             .as_ref()
+            .filter(|t| t.rgba.is_empty() && !t.blocks.is_empty())
+            .and_then(|t| {
+                let mut d = PatchTexture {
+                    rgba: Vec::new(),
+                    mips: Vec::new(),
+                    ..t.clone()
+                };
+                d.decode_rgba().ok().map(|()| d)
+            });
+        let texture = decoded
+            .as_ref()
+            .or(patch.texture.as_ref())
             .filter(|t| !t.rgba.is_empty())
             .map(|t| {
                 // Larger than the device's largest texture: the first mip that fits (the
@@ -226,7 +240,7 @@ impl KeptStore {
         patch
             .texture
             .as_ref()
-            .filter(|t| !t.rgba.is_empty())
+            .filter(|t| !t.rgba.is_empty() || !t.blocks.is_empty())
             .map_or(0.0, |t| {
                 tessera_render::patch_texel_size(patch, t.width, t.height, self.grid.step())
             })

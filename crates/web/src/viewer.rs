@@ -115,6 +115,8 @@ pub(crate) struct Remote {
     pub workers_failed: Rc<Cell<bool>>,
     /// Make textures' mips in the workers (a textured model).
     mips: bool,
+    /// The GPU samples BC7: the workers hand BC7 textures over as blocks.
+    pub blocks: bool,
 }
 
 /// The abort controllers of the requests in flight.
@@ -135,6 +137,7 @@ struct Dispatch {
     failed: Rc<Cell<bool>>,
     closed: Rc<Cell<bool>>,
     mips: bool,
+    blocks: bool,
 }
 
 impl Remote {
@@ -151,6 +154,7 @@ impl Remote {
             decoder: None,
             workers_failed: Rc::new(Cell::new(false)),
             mips,
+            blocks: false,
         }
     }
 
@@ -226,6 +230,7 @@ impl Remote {
             failed: self.workers_failed.clone(),
             closed: self.closed.clone(),
             mips: self.mips,
+            blocks: self.blocks,
         })
     }
 }
@@ -238,10 +243,12 @@ fn dispatch(d: &Dispatch) {
     if d.failed.get() || d.closed.get() {
         return;
     }
-    let jobs =
-        d.fetcher
-            .borrow_mut()
-            .take_jobs(d.decoders.workers * JOBS_PER_WORKER, JOB_BYTES, d.mips);
+    let jobs = d.fetcher.borrow_mut().take_jobs(
+        d.decoders.workers * JOBS_PER_WORKER,
+        JOB_BYTES,
+        d.mips,
+        d.blocks,
+    );
     for (node, job) in jobs {
         let promise = match d
             .decoders
@@ -1147,13 +1154,16 @@ impl Viewer {
         // Levels for the vertex tags; parents and their errors for the texel detail a
         // textured patch morphs from (as the desktop).
         cache.set_nodes(0, &index);
-        // Textured models (format version 3, a texture per patch): uploaded with their
-        // textures (mips made at upload, from the first level that fits the device's
-        // largest texture) and drawn through the textured pipeline, as the desktop.
+        // Textured models (a texture per patch): uploaded with their textures (BC7 as
+        // blocks where the device samples them, else RGBA8 with mips, from the first
+        // level that fits the device's largest texture) and drawn through the textured
+        // pipeline, as the desktop.
         let textured = index.header().attributes & ATTR_TEXTURE != 0;
         cache.set_textured(0, textured);
+        cache.set_texture_codec(0, index.header().patch_texture_codec());
         let mut scheduler = new_scheduler(&index, &o);
         let mut source = Remote::new(http, &index, roots, textured);
+        source.blocks = cache.samples_bc7();
         // `cancelRequests: false` lets requests the view stopped wanting finish (to
         // compare).
         if opts["cancelRequests"] == Value::Bool(false) {

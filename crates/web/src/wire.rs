@@ -24,7 +24,7 @@ use tessera_format::{
 use tessera_stream::Answer;
 
 /// Version of the job and reply layouts (bumped whenever either changes).
-const WIRE_VERSION: u8 = 1;
+const WIRE_VERSION: u8 = 2;
 /// Bytes of a job's header (the patch's bytes follow).
 const JOB_HEADER_BYTES: usize = 40;
 const REPLY_OK: u8 = 0;
@@ -39,11 +39,14 @@ pub struct Job {
     pub shape: PatchShape,
     /// Make the texture's mip chain too (so the upload on the main thread only copies).
     pub mips: bool,
+    /// The main thread's GPU samples BC7: a BC7 texture comes back as its blocks;
+    /// otherwise the worker decodes them to RGBA8 (every stored level).
+    pub blocks: bool,
 }
 
 impl Job {
     /// The job for node `node` of `index`.
-    pub fn of(index: &ModelIndex, node: u32, mips: bool) -> Result<Job, FormatError> {
+    pub fn of(index: &ModelIndex, node: u32, mips: bool, blocks: bool) -> Result<Job, FormatError> {
         let n = index.node(node as usize)?;
         Ok(Job {
             node,
@@ -51,13 +54,14 @@ impl Job {
             crc32: n.patch_crc32,
             shape: n.into(),
             mips,
+            blocks,
         })
     }
 
     /// The job's message: its header, then `patch` (the patch's bytes as fetched).
     pub fn to_bytes(&self, patch: &[u8]) -> Vec<u8> {
         let mut b = Vec::with_capacity(JOB_HEADER_BYTES + patch.len());
-        b.extend([WIRE_VERSION, u8::from(self.mips), 0, 0]);
+        b.extend([WIRE_VERSION, u8::from(self.mips), u8::from(self.blocks), 0]);
         for v in [
             self.node,
             self.attributes,
@@ -101,6 +105,7 @@ impl Job {
                 texture_size: [h(36), h(38)],
             },
             mips: msg[1] != 0,
+            blocks: msg[2] != 0,
         };
         Ok((job, &msg[JOB_HEADER_BYTES..]))
     }
@@ -121,6 +126,15 @@ pub fn run_job(
         }
         let mut p = decode_patch(bytes, job.attributes, job.shape)
             .map_err(|e| e.with_node(job.node).to_string())?;
+        if let Some(t) = p
+            .texture
+            .as_mut()
+            .filter(|t| !t.blocks.is_empty() && !job.blocks)
+        {
+            t.decode_rgba()
+                .map_err(|e| e.with_node(job.node).to_string())?;
+            t.blocks = Vec::new();
+        }
         if job.mips {
             if let Some(t) = p.texture.as_mut() {
                 if t.mips.is_empty() && !t.rgba.is_empty() {
@@ -145,7 +159,10 @@ pub fn run_job(
 fn write_patch(p: &PatchData, ms: f64) -> Vec<u8> {
     let t = p.texture.as_ref();
     let texels = t.map_or(0, |t| {
-        t.rgba.len() + t.encoded.len() + t.mips.iter().map(Vec::len).sum::<usize>()
+        t.rgba.len()
+            + t.encoded.len()
+            + t.mips.iter().map(Vec::len).sum::<usize>()
+            + t.blocks.iter().map(Vec::len).sum::<usize>()
     });
     let mut b = Vec::with_capacity(
         128 + p.positions.len() * 12
@@ -177,7 +194,7 @@ fn write_patch(p: &PatchData, ms: f64) -> Vec<u8> {
         let codec = match t.codec {
             None => 0u32,
             Some(TextureCodec::Png) => 1,
-            Some(TextureCodec::Jpeg) => 2,
+            Some(c) => c as u32,
         };
         for v in [
             t.width,
@@ -186,10 +203,11 @@ fn write_patch(p: &PatchData, ms: f64) -> Vec<u8> {
             t.encoded.len() as u32,
             t.rgba.len() as u32,
             t.mips.len() as u32,
+            t.blocks.len() as u32,
         ] {
             b.extend(v.to_le_bytes());
         }
-        for m in &t.mips {
+        for m in t.mips.iter().chain(&t.blocks) {
             b.extend((m.len() as u32).to_le_bytes());
         }
     }
@@ -209,7 +227,7 @@ fn write_patch(p: &PatchData, ms: f64) -> Vec<u8> {
     if let Some(t) = t {
         b.extend_from_slice(&t.encoded);
         b.extend_from_slice(&t.rgba);
-        for m in &t.mips {
+        for m in t.mips.iter().chain(&t.blocks) {
             b.extend_from_slice(m);
         }
     }
@@ -300,13 +318,19 @@ pub fn read_reply<R: ReplyBytes + ?Sized>(node: u32, msg: &R) -> Result<(Answer,
         *n = c.u32()?;
     }
     let texture = if head[2] != 0 {
-        let [width, height, codec, encoded, rgba, mips] = [0; 6].map(|_| c.u32());
-        let mips = mips?;
+        let [width, height, codec, encoded, rgba, mips, blocks] = [0; 7].map(|_| c.u32());
+        let (mips, blocks) = (mips?, blocks?);
         let mut mip_lens = Vec::with_capacity(mips.min(32) as usize);
         for _ in 0..mips {
             mip_lens.push(c.u32()?);
         }
-        Some((width?, height?, codec?, encoded?, rgba?, mip_lens))
+        let mut block_lens = Vec::with_capacity(blocks.min(32) as usize);
+        for _ in 0..blocks {
+            block_lens.push(c.u32()?);
+        }
+        Some((
+            width?, height?, codec?, encoded?, rgba?, mip_lens, block_lens,
+        ))
     } else {
         None
     };
@@ -329,12 +353,15 @@ pub fn read_reply<R: ReplyBytes + ?Sized>(node: u32, msg: &R) -> Result<(Answer,
         });
     }
     p.chart_ids = c.array(counts[7])?;
-    if let Some((width, height, codec, encoded, rgba, mip_lens)) = texture {
+    if let Some((width, height, codec, encoded, rgba, mip_lens, block_lens)) = texture {
         let codec = match codec {
             0 => None,
-            1 => Some(TextureCodec::Png),
-            2 => Some(TextureCodec::Jpeg),
-            k => return Err(format!("decode reply: texture codec {k}")),
+            k => Some(
+                u8::try_from(k)
+                    .ok()
+                    .and_then(TextureCodec::from_byte)
+                    .ok_or_else(|| format!("decode reply: texture codec {k}"))?,
+            ),
         };
         let mut t = PatchTexture {
             width,
@@ -342,10 +369,13 @@ pub fn read_reply<R: ReplyBytes + ?Sized>(node: u32, msg: &R) -> Result<(Answer,
             codec,
             encoded: c.bytes(encoded)?,
             rgba: c.bytes(rgba)?,
-            mips: Vec::new(),
+            ..Default::default()
         };
         for n in mip_lens {
             t.mips.push(c.bytes(n)?);
+        }
+        for n in block_lens {
+            t.blocks.push(c.bytes(n)?);
         }
         p.texture = Some(t);
     }
@@ -396,6 +426,7 @@ mod tests {
                 texture_size: [640, 48],
             },
             mips: true,
+            blocks: true,
         };
         let msg = job.to_bytes(&[9, 8, 7]);
         let (back, bytes) = Job::parse(&msg).unwrap();
@@ -420,6 +451,7 @@ mod tests {
                 texture_size: [0, 0],
             },
             mips: false,
+            blocks: false,
         };
         let reply = run_job(&job.to_bytes(b"not a patch"), chain, clock);
         match read_reply(3, &reply[..]).unwrap().0 {
@@ -455,6 +487,7 @@ mod tests {
                 encoded: Vec::new(),
                 rgba: (0..32).collect(),
                 mips: chain(&[5], 4, 2),
+                blocks: vec![vec![1; 16], vec![2; 16], vec![3; 16]],
             }),
         };
         let msg = write_patch(&p, 2.5);

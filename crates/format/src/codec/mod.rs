@@ -11,6 +11,7 @@ use std::borrow::Cow;
 
 mod morph;
 mod normals;
+pub mod texels;
 
 use morph::{decode_morph, encode_morph};
 use normals::{decode_normals, encode_normals};
@@ -62,29 +63,49 @@ const TEXTURE_HEADER_BYTES: usize = 12;
 /// Most charts a patch may have (chart ids are u16).
 pub const MAX_PATCH_CHARTS: usize = u16::MAX as usize;
 
-/// How a patch texture's image is encoded (byte 0 of the texture block).
+/// How a patch texture's image is encoded (byte 0 of the texture block, and the
+/// header's `texture_codec`: every patch of a model uses the same).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum TextureCodec {
-    /// PNG, lossless: the finest patches keep the source's texels exactly.
+    /// PNG, lossless: the finest patches keep the source's texels exactly. Readers make
+    /// the mip chain at load.
     Png = 1,
-    /// Baseline JPEG.
+    /// Baseline JPEG. Readers make the mip chain at load.
     Jpeg = 2,
+    /// BC7 (`Bc7RgbaUnorm`: 16 bytes a 4x4 block, 1 byte a texel), the whole mip chain
+    /// stored, the blocks of all levels zstd-compressed together. What GPUs sample
+    /// directly: a quarter of RGBA8's GPU memory and no image decode at load; readers
+    /// without BC7 sampling decode the blocks to RGBA8 ([`PatchTexture::decode_rgba`]).
+    /// Width and height are multiples of 4.
+    Bc7 = 3,
 }
 
 impl TextureCodec {
-    fn from_byte(b: u8) -> Option<TextureCodec> {
+    /// The codec of byte `b` (the texture block's byte 0, the header's `texture_codec`).
+    pub fn from_byte(b: u8) -> Option<TextureCodec> {
         match b {
             1 => Some(TextureCodec::Png),
             2 => Some(TextureCodec::Jpeg),
+            3 => Some(TextureCodec::Bc7),
             _ => None,
         }
     }
 
-    /// The `image` crate's format.
-    fn format(self) -> image::ImageFormat {
+    /// The `image` crate's format (PNG and JPEG).
+    fn format(self) -> Option<image::ImageFormat> {
         match self {
-            TextureCodec::Png => image::ImageFormat::Png,
-            TextureCodec::Jpeg => image::ImageFormat::Jpeg,
+            TextureCodec::Png => Some(image::ImageFormat::Png),
+            TextureCodec::Jpeg => Some(image::ImageFormat::Jpeg),
+            TextureCodec::Bc7 => None,
+        }
+    }
+
+    /// The name `tessera build --texture-codec` takes and `info` prints.
+    pub fn name(self) -> &'static str {
+        match self {
+            TextureCodec::Png => "png",
+            TextureCodec::Jpeg => "jpeg",
+            TextureCodec::Bc7 => "bc7",
         }
     }
 }
@@ -114,9 +135,11 @@ impl TextureChart {
     }
 }
 
-/// A patch's texture: `encoded` (what the file stores) and/or `rgba` (decoded RGBA8,
-/// rows top to bottom, `4 * width * height` bytes). [`decode_patch`] fills `rgba` and
-/// leaves `encoded` empty; [`encode_patch`] writes `encoded`.
+/// A patch's texture: `encoded` (what the file stores) and/or its decoded texels:
+/// `rgba` (RGBA8, rows top to bottom, `4 * width * height` bytes) or, for
+/// [`TextureCodec::Bc7`], `blocks`. [`decode_patch`] with texels fills `rgba` for PNG
+/// and JPEG and `blocks` for BC7, and leaves `encoded` empty; [`encode_patch`] writes
+/// `encoded`.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct PatchTexture {
     pub width: u32,
@@ -126,13 +149,24 @@ pub struct PatchTexture {
     pub rgba: Vec<u8>,
     /// Mip levels 1, 2, .. of `rgba` (RGBA8, each half the last, down to 1x1), when
     /// they were made before the upload (the browser's decode workers make them off
-    /// the main thread); empty: the GPU cache makes them when it uploads. Never stored
-    /// in a file.
+    /// the main thread; [`PatchTexture::decode_rgba`] of a BC7 texture decodes the
+    /// stored ones); empty: the GPU cache makes them when it uploads. Never stored in a
+    /// file.
     pub mips: Vec<Vec<u8>>,
+    /// BC7 blocks of every mip level, level 0 first, down to 1x1
+    /// ([`texels::bc7_level_bytes`] each): a BC7 texture as the GPU takes it.
+    pub blocks: Vec<Vec<u8>>,
 }
+
+/// zstd level of BC7 blocks: 9 stores 0.88 bytes a texel on the scissors' texture at
+/// 18 Mtexel/s with the encoder (level 3: within 2% of the bytes, measured by
+/// `bench_texcodecs`); decoding runs at ~700 Mtexel/s whatever the level.
+pub const BC7_ZSTD_LEVEL: i32 = 9;
 
 impl PatchTexture {
     /// Encodes RGBA8 texels with `codec` (`quality` 1..=100 for JPEG; JPEG drops alpha).
+    /// BC7 textures are made from their encoded blocks ([`PatchTexture::from_bc7`]):
+    /// the encoder is the builder's.
     pub fn encode(
         width: u32,
         height: u32,
@@ -162,26 +196,103 @@ impl PatchTexture {
                     .encode(&rgb, width, height, image::ExtendedColorType::Rgb8)
                     .map_err(err)?;
             }
+            TextureCodec::Bc7 => {
+                return Err(corrupt(
+                    "BC7 textures are made from their blocks (PatchTexture::from_bc7)",
+                ))
+            }
         }
         Ok(PatchTexture {
             width,
             height,
             codec: Some(codec),
             encoded,
-            rgba: Vec::new(),
-            mips: Vec::new(),
+            ..Default::default()
         })
     }
 
-    /// Decodes `encoded` into `rgba`, checking the image is `width` x `height`.
+    /// A BC7 texture from the blocks of its whole mip chain (`levels[0]` the
+    /// `width` x `height` level, each next one half the last down to 1x1, each
+    /// [`texels::bc7_level_bytes`] long), compressed with zstd for the file. Width and
+    /// height must be multiples of 4 (so every GPU takes level 0).
+    pub fn from_bc7(
+        width: u32,
+        height: u32,
+        levels: Vec<Vec<u8>>,
+    ) -> Result<PatchTexture, FormatError> {
+        check_bc7(width, height, &levels)?;
+        let encoded = zstd::bulk::compress(&levels.concat(), BC7_ZSTD_LEVEL)
+            .map_err(|e| corrupt(format!("texture: zstd: {e}")))?;
+        Ok(PatchTexture {
+            width,
+            height,
+            codec: Some(TextureCodec::Bc7),
+            encoded,
+            blocks: levels,
+            ..Default::default()
+        })
+    }
+
+    /// Decodes a BC7 texture's `encoded` into `blocks` (every level; no texel decode).
+    /// Nothing for PNG and JPEG, or when `blocks` are there already.
+    pub fn decode_blocks(&mut self) -> Result<(), FormatError> {
+        if self.codec != Some(TextureCodec::Bc7) || !self.blocks.is_empty() {
+            return Ok(());
+        }
+        let (w, h) = (self.width, self.height);
+        if w % 4 != 0
+            || h % 4 != 0
+            || w == 0
+            || h == 0
+            || w > MAX_TEXTURE_DIM
+            || h > MAX_TEXTURE_DIM
+        {
+            return Err(corrupt(format!(
+                "BC7 texture of {w}x{h} texels (multiples of 4 up to {MAX_TEXTURE_DIM})"
+            )));
+        }
+        let want = texels::bc7_chain_bytes(w, h);
+        let raw = zstd::bulk::decompress(&self.encoded, want)
+            .map_err(|e| corrupt(format!("texture: zstd: {e}")))?;
+        if raw.len() != want {
+            return Err(corrupt(format!(
+                "BC7 texture holds {} bytes of blocks, its {w}x{h} mip chain {want}",
+                raw.len()
+            )));
+        }
+        let mut at = 0;
+        self.blocks = (0..texels::mip_level_count(w, h))
+            .map(|l| {
+                let (lw, lh) = texels::level_size(w, h, l);
+                let n = texels::bc7_level_bytes(lw, lh);
+                at += n;
+                raw[at - n..at].to_vec()
+            })
+            .collect();
+        self.encoded = Vec::new();
+        Ok(())
+    }
+
+    /// Decodes the texture to RGBA8 `rgba`, checking it is `width` x `height`: PNG and
+    /// JPEG from `encoded`; BC7 from its blocks (`encoded` or `blocks`), level 0 into
+    /// `rgba` and the stored levels below it into `mips` (`blocks` are kept).
     pub fn decode_rgba(&mut self) -> Result<(), FormatError> {
         let codec = self
             .codec
             .ok_or_else(|| corrupt("texture without a codec"))?;
-        let mut reader = image::ImageReader::with_format(
-            std::io::Cursor::new(&self.encoded[..]),
-            codec.format(),
-        );
+        let Some(format) = codec.format() else {
+            self.decode_blocks()?;
+            let (w, h) = (self.width, self.height);
+            let mut levels = self.blocks.iter().enumerate().map(|(l, b)| {
+                let (lw, lh) = texels::level_size(w, h, l as u32);
+                texels::bc7_to_rgba(b, lw, lh)
+            });
+            self.rgba = levels.next().unwrap_or_default();
+            self.mips = levels.collect();
+            return Ok(());
+        };
+        let mut reader =
+            image::ImageReader::with_format(std::io::Cursor::new(&self.encoded[..]), format);
         let mut limits = image::Limits::default();
         limits.max_image_width = Some(MAX_TEXTURE_DIM);
         limits.max_image_height = Some(MAX_TEXTURE_DIM);
@@ -203,6 +314,31 @@ impl PatchTexture {
         self.encoded = Vec::new();
         Ok(())
     }
+}
+
+/// Checks BC7 `levels` are the whole chain of a `width` x `height` texture (multiples
+/// of 4, at most [`MAX_TEXTURE_DIM`]).
+fn check_bc7(width: u32, height: u32, levels: &[Vec<u8>]) -> Result<(), FormatError> {
+    if !width.is_multiple_of(4)
+        || !height.is_multiple_of(4)
+        || !(1..=MAX_TEXTURE_DIM).contains(&width)
+        || !(1..=MAX_TEXTURE_DIM).contains(&height)
+    {
+        return Err(corrupt(format!(
+            "BC7 texture of {width}x{height} texels (multiples of 4 up to {MAX_TEXTURE_DIM})"
+        )));
+    }
+    let count = texels::mip_level_count(width, height) as usize;
+    let sizes_fit = levels.iter().enumerate().all(|(l, b)| {
+        let (lw, lh) = texels::level_size(width, height, l as u32);
+        b.len() == texels::bc7_level_bytes(lw, lh)
+    });
+    if levels.len() != count || !sizes_fit {
+        return Err(corrupt(format!(
+            "BC7 texture of {width}x{height} needs {count} levels of whole blocks"
+        )));
+    }
+    Ok(())
 }
 
 /// One node's decoded mesh patch.
@@ -733,7 +869,11 @@ pub fn decode_patch_with(
         (patch.charts, patch.chart_ids) = decode_charts(secs[SEC_CHARTS], nu)?;
         let mut t = decode_texture_block(&bytes[payload_end..], texture_size)?;
         if texels {
-            t.decode_rgba()?;
+            if t.codec == Some(TextureCodec::Bc7) {
+                t.decode_blocks()?;
+            } else {
+                t.decode_rgba()?;
+            }
         }
         patch.texture = Some(t);
     }
@@ -801,8 +941,7 @@ fn decode_texture_block(b: &[u8], size: [u16; 2]) -> Result<PatchTexture, Format
         height,
         codec: Some(codec),
         encoded: b[TEXTURE_HEADER_BYTES..].to_vec(),
-        rgba: Vec::new(),
-        mips: Vec::new(),
+        ..Default::default()
     })
 }
 
