@@ -1804,7 +1804,7 @@ fn the_page_draws_a_textured_scan_as_tessera_render() {
     for r in &results {
         let s = &r["stats"];
         eprintln!(
-            "{}: {} in {} ms; {} triangles, {} nodes, level {}, {} bytes in {} requests, converged {} ms after open; {} decode workers: {} patches, {:.1} ms mean, {} bytes of worker heap; replies taken in {:.1} ms mean, {:.1} max; main thread: decode {:.1} ms/patch mean ({} patches in all, {:.1} max, {:.0} total); uploads {} ({} textured, {:.1} ms mean, {:.1} max); GPU {} bytes of which textures {}; max texture {} (adapter {}); largest drawn texture {}; HUD {:?}",
+            "{}: {} in {} ms; {} triangles, {} nodes, level {}, {} bytes in {} requests, converged {} ms after open; {} decode workers: {} patches, {:.1} ms mean, {} bytes of worker heap; replies taken in {:.1} ms mean, {:.1} max; main thread: decode {:.1} ms/patch mean ({} patches in all, {:.1} max, {:.0} total); uploads {} ({} textured, {:.1} ms mean, {:.1} max); GPU {} bytes of which textures {} (BC7 as blocks: {}); max texture {} (adapter {}); largest drawn texture {}; HUD {:?}",
             r["name"],
             r["outcome"],
             r["ms"],
@@ -1830,6 +1830,7 @@ fn the_page_draws_a_textured_scan_as_tessera_render() {
             s["upload_ms_max"].as_f64().unwrap_or(0.0),
             s["gpu_bytes"],
             s["gpu_texture_bytes"],
+            s["texture_blocks"],
             s["max_texture_dim"],
             s["adapter_max_texture_dim"],
             s["largest_texture"],
@@ -2258,8 +2259,13 @@ fn the_three_js_adapter_streams_the_model_into_a_three_scene() {
 /// PSNR the three.js page's model must keep, with its clock held (every patch that
 /// arrives stays at its parent's shape), against the same page drawing only the cut it
 /// started from (a tolerance so large that nothing refines). See the test for what was
-/// measured.
-const MIN_HELD_PSNR_DB: f64 = 48.0;
+/// measured. The textured scissors measured 49.0 dB with its default BC7 textures
+/// (52.9 with PNG ones): each patch's texture is encoded on its own, so a child drawn at
+/// its parent's texel detail differs from the parent's texture by both block errors.
+const MIN_HELD_PSNR_DB: f64 = 46.0;
+/// PSNR below which the picture changed (the controls: arrivals without morphing, the
+/// converged cut): measured 40.4-41.3 dB.
+const MAX_CHANGED_PSNR_DB: f64 = 45.0;
 
 /// Geomorphing in the three.js adapter (issue 13): a patch that refines its parent
 /// comes in at the parent's shape (and, textured, at its texel detail) and blends to its
@@ -2347,7 +2353,7 @@ fn the_three_js_adapter_geomorphs_so_refinements_do_not_pop() {
         assert_eq!(unmorphed["morphing_meshes"], 0, "{unmorphed}");
         assert!(tri(&unmorphed) > tri(&start), "{unmorphed}");
         assert!(
-            p_unmorphed < MIN_HELD_PSNR_DB - 3.0,
+            p_unmorphed < MAX_CHANGED_PSNR_DB,
             "{model}: unmorphed {p_unmorphed:.2} dB"
         );
         // Released, the blends end: the cut without morphing, and its detail.
@@ -2357,7 +2363,7 @@ fn the_three_js_adapter_geomorphs_so_refinements_do_not_pop() {
         );
         assert_eq!(tri(&idle), tri(&idle_unmorphed));
         assert!(
-            p_idle < MIN_HELD_PSNR_DB - 3.0,
+            p_idle < MAX_CHANGED_PSNR_DB,
             "{model}: converged {p_idle:.2} dB"
         );
     }

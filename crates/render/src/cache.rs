@@ -594,6 +594,13 @@ impl GpuCache {
         self.bc7
     }
 
+    /// Where BC7 textures go up as blocks, the device's largest texture (a texture
+    /// whose first level that fits is not whole blocks is decoded:
+    /// [`bc7_uploads_as_blocks`]); `None` where every BC7 texture is decoded.
+    pub fn bc7_block_limit(&self) -> Option<u32> {
+        self.bc7.then_some(self.max_texture_dim)
+    }
+
     /// Whether a BC7 texture of `width` x `height` goes to this device as blocks.
     fn bc7_as_blocks(&self, width: u32, height: u32) -> bool {
         self.bc7 && bc7_uploads_as_blocks(width, height, self.max_texture_dim)

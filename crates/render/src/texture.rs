@@ -20,22 +20,14 @@
 /// Format of every patch texture (see the module docs for why not sRGB).
 pub const PATCH_TEXTURE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 
-use tessera_format::texels::bc7_level_bytes;
-pub use tessera_format::texels::{downsample, level_size, mip_chain, mip_level_count};
+use tessera_format::texels::{bc7_level_bytes, first_level};
+pub use tessera_format::texels::{
+    bc7_uploads_as_blocks, downsample, level_size, mip_chain, mip_level_count,
+};
 
 /// Format of BC7 patch textures (`TextureCodec::Bc7`), Unorm like
 /// [`PATCH_TEXTURE_FORMAT`] and for the same reason.
 pub const BC7_TEXTURE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Bc7RgbaUnorm;
-
-/// The first mip level of a `width` x `height` texture whose size fits `max_dim`.
-fn first_level(width: u32, height: u32, max_dim: u32) -> u32 {
-    let max_dim = max_dim.max(1);
-    let mut l = 0;
-    while width.max(height) >> l > max_dim {
-        l += 1;
-    }
-    l
-}
 
 /// GPU bytes of a `width` x `height` RGBA8 patch texture with its mip chain (about 4/3 of
 /// `4 * width * height`), as uploaded to a device whose largest texture is `max_dim`
@@ -60,14 +52,6 @@ pub fn texture_gpu_bytes_as(width: u32, height: u32, max_dim: u32, bc7: bool) ->
             }
         })
         .sum()
-}
-
-/// Whether a `width` x `height` BC7 texture can be uploaded as blocks to a device
-/// whose largest texture is `max_dim`: the first level that fits has whole blocks
-/// (level 0 always has; a texture above the device's limit starts lower).
-pub fn bc7_uploads_as_blocks(width: u32, height: u32, max_dim: u32) -> bool {
-    let (w, h) = level_size(width, height, first_level(width, height, max_dim));
-    w % 4 == 0 && h % 4 == 0
 }
 
 /// Whether `mips` are the whole chain below a `width` x `height` level 0, each of its

@@ -389,7 +389,7 @@ impl Fetcher {
         max_jobs: usize,
         max_bytes: u64,
         mips: bool,
-        blocks: bool,
+        blocks: Option<u32>,
     ) -> Vec<(u32, Vec<u8>)> {
         let mut out = Vec::new();
         while self.at_workers < max_jobs {

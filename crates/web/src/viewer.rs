@@ -115,8 +115,10 @@ pub(crate) struct Remote {
     pub workers_failed: Rc<Cell<bool>>,
     /// Make textures' mips in the workers (a textured model).
     mips: bool,
-    /// The GPU samples BC7: the workers hand BC7 textures over as blocks.
-    pub blocks: bool,
+    /// The GPU samples BC7 (its largest texture; `None`: it does not): the workers hand
+    /// BC7 textures over as blocks where they upload as blocks
+    /// ([`crate::wire::Job::blocks`]), else decoded.
+    pub blocks: Option<u32>,
 }
 
 /// The abort controllers of the requests in flight.
@@ -137,7 +139,7 @@ struct Dispatch {
     failed: Rc<Cell<bool>>,
     closed: Rc<Cell<bool>>,
     mips: bool,
-    blocks: bool,
+    blocks: Option<u32>,
 }
 
 impl Remote {
@@ -154,7 +156,7 @@ impl Remote {
             decoder: None,
             workers_failed: Rc::new(Cell::new(false)),
             mips,
-            blocks: false,
+            blocks: None,
         }
     }
 
@@ -1163,7 +1165,7 @@ impl Viewer {
         cache.set_texture_codec(0, index.header().patch_texture_codec());
         let mut scheduler = new_scheduler(&index, &o);
         let mut source = Remote::new(http, &index, roots, textured);
-        source.blocks = cache.samples_bc7();
+        source.blocks = cache.bc7_block_limit();
         // `cancelRequests: false` lets requests the view stopped wanting finish (to
         // compare).
         if opts["cancelRequests"] == Value::Bool(false) {
@@ -1298,6 +1300,8 @@ impl Viewer {
             // The device's largest 2D texture: larger patch textures are uploaded from
             // their first mip that fits.
             "max_texture_dim": self.gpu.device.limits().max_texture_dimension_2d,
+            // BC7 textures go to the GPU as blocks (the device samples BC), else RGBA8.
+            "texture_blocks": self.cache.samples_bc7(),
             "adapter_max_texture_dim": self.gpu.adapter.limits().max_texture_dimension_2d,
             // {"node", "stored": [w, h], "uploaded": [w, h]} or null (no texture drawn).
             "largest_texture": largest_texture,

@@ -18,8 +18,8 @@
 use std::sync::Arc;
 
 use tessera_format::{
-    decode_patch, FormatError, ModelIndex, PatchData, PatchShape, PatchTexture, TextureChart,
-    TextureCodec,
+    decode_patch, texels, FormatError, ModelIndex, PatchData, PatchShape, PatchTexture,
+    TextureChart, TextureCodec,
 };
 use tessera_stream::Answer;
 
@@ -39,14 +39,22 @@ pub struct Job {
     pub shape: PatchShape,
     /// Make the texture's mip chain too (so the upload on the main thread only copies).
     pub mips: bool,
-    /// The main thread's GPU samples BC7: a BC7 texture comes back as its blocks;
-    /// otherwise the worker decodes them to RGBA8 (every stored level).
+    /// The main thread uploads this patch's BC7 texture as blocks (its GPU samples BC7
+    /// and the first level that fits has whole blocks): it comes back as its blocks;
+    /// otherwise the worker decodes them to RGBA8 (every stored level), off the main
+    /// thread.
     pub blocks: bool,
 }
 
 impl Job {
     /// The job for node `node` of `index`.
-    pub fn of(index: &ModelIndex, node: u32, mips: bool, blocks: bool) -> Result<Job, FormatError> {
+    /// `blocks`: the largest texture of a GPU that samples BC7 (`None`: it does not).
+    pub fn of(
+        index: &ModelIndex,
+        node: u32,
+        mips: bool,
+        blocks: Option<u32>,
+    ) -> Result<Job, FormatError> {
         let n = index.node(node as usize)?;
         Ok(Job {
             node,
@@ -54,7 +62,10 @@ impl Job {
             crc32: n.patch_crc32,
             shape: n.into(),
             mips,
-            blocks,
+            blocks: blocks.is_some_and(|max| {
+                let [w, h] = n.texture_size.map(u32::from);
+                texels::bc7_uploads_as_blocks(w, h, max)
+            }),
         })
     }
 
@@ -503,6 +514,73 @@ mod tests {
         // Cut anywhere: an error, never a panic.
         for cut in [12, 20, 50, msg.len() - 1] {
             assert!(read_reply(11, &msg[..cut]).is_err(), "cut at {cut}");
+        }
+    }
+
+    /// A BC7 texture comes back as its blocks where the page uploads blocks, and
+    /// decoded to RGBA8 with its stored mips (by the worker, off the main thread) where
+    /// it does not: a device without BC, or one whose texture limit starts the texture
+    /// at a level that is not whole blocks (8x8 with a limit of 2: a 2x2 level).
+    #[test]
+    fn bc7_textures_come_back_as_blocks_or_decoded_as_the_page_uploads_them() {
+        use tessera_format::{encode_patch, ATTR_TEXTURE, ATTR_UVS};
+        let levels: Vec<Vec<u8>> = (0..4)
+            .map(|l| {
+                let (w, h) = texels::level_size(8, 8, l);
+                (0..texels::bc7_level_bytes(w, h))
+                    .map(|i| (i * 29 + l as usize) as u8 | 0x40)
+                    .collect()
+            })
+            .collect();
+        let p = PatchData {
+            positions: vec![[0, 0, 0], [9, 0, 0], [0, 9, 0]],
+            uvs: vec![[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]],
+            indices: vec![0, 1, 2],
+            charts: vec![TextureChart {
+                image: 0,
+                scale: [1.0, 1.0],
+                offset: [0.0, 0.0],
+            }],
+            chart_ids: vec![0; 3],
+            texture: Some(PatchTexture::from_bc7(8, 8, levels.clone()).unwrap()),
+            ..PatchData::default()
+        };
+        let attributes = ATTR_UVS | ATTR_TEXTURE;
+        let bytes = encode_patch(&p, attributes, [0; 3]);
+        let job = |blocks: Option<u32>| {
+            let mut j = Job {
+                node: 1,
+                attributes,
+                crc32: crc32fast::hash(&bytes),
+                shape: PatchShape {
+                    quant_min: [0; 3],
+                    vertex_count: 3,
+                    triangle_count: 1,
+                    texture_size: [8, 8],
+                },
+                mips: true,
+                blocks: false,
+            };
+            j.blocks = blocks.is_some_and(|max| texels::bc7_uploads_as_blocks(8, 8, max));
+            j
+        };
+        let texture = |j: Job| match read_reply(1, &run_job(&j.to_bytes(&bytes), chain, clock)[..])
+            .unwrap()
+            .0
+        {
+            Answer::Loaded { patch, .. } => patch.texture.clone().unwrap(),
+            a => panic!("{a:?}"),
+        };
+        let as_blocks = texture(job(Some(4096)));
+        assert_eq!(as_blocks.blocks, levels);
+        assert!(as_blocks.rgba.is_empty());
+        for j in [job(None), job(Some(2))] {
+            assert!(!j.blocks);
+            let t = texture(j);
+            assert!(t.blocks.is_empty());
+            assert_eq!(t.rgba, texels::bc7_to_rgba(&levels[0], 8, 8));
+            assert_eq!(t.mips.len(), 3);
+            assert_eq!(t.mips[0], texels::bc7_to_rgba(&levels[1], 4, 4));
         }
     }
 }

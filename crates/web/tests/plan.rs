@@ -227,7 +227,7 @@ impl PatchSource for Fake<'_> {
             }
         }
         if self.workers {
-            let jobs = self.fetcher.take_jobs(8, 64 << 20, true, true);
+            let jobs = self.fetcher.take_jobs(8, 64 << 20, true, Some(4096));
             self.jobs.extend(jobs);
             self.fetcher.drain_settled(out);
         } else {
@@ -545,7 +545,7 @@ fn decode_workers_converge_to_the_direct_cut() {
     for n in 0..index.nodes().len() as u32 {
         let range = index.patch_range(n as usize).unwrap();
         let bytes = &file[range.start as usize..range.end as usize];
-        let job = tessera_web::wire::Job::of(&index, n, false, true).unwrap();
+        let job = tessera_web::wire::Job::of(&index, n, false, Some(4096)).unwrap();
         let reply = tessera_web::wire::run_job(&job.to_bytes(bytes), |_, _, _| Vec::new(), || 0.0);
         match tessera_web::wire::read_reply(n, &reply[..]).unwrap().0 {
             Answer::Loaded { node, patch } => {
@@ -561,7 +561,7 @@ fn decode_workers_converge_to_the_direct_cut() {
     let range = index.patch_range(5).unwrap();
     let mut bad = file[range.start as usize..range.end as usize].to_vec();
     bad[10] ^= 1;
-    let job = tessera_web::wire::Job::of(&index, 5, false, true).unwrap();
+    let job = tessera_web::wire::Job::of(&index, 5, false, Some(4096)).unwrap();
     let reply = tessera_web::wire::run_job(&job.to_bytes(&bad), |_, _, _| Vec::new(), || 0.0);
     match tessera_web::wire::read_reply(5, &reply[..]).unwrap().0 {
         Answer::Failed { node: 5, error } => assert!(error.contains("checksum"), "{error}"),

@@ -20,6 +20,26 @@ pub fn level_size(width: u32, height: u32, level: u32) -> (u32, u32) {
     ((width >> level).max(1), (height >> level).max(1))
 }
 
+/// The first mip level of a `width` x `height` texture whose size fits `max_dim` (a
+/// device's largest texture: the levels above it are not uploaded).
+pub fn first_level(width: u32, height: u32, max_dim: u32) -> u32 {
+    let max_dim = max_dim.max(1);
+    let mut l = 0;
+    while width.max(height) >> l > max_dim {
+        l += 1;
+    }
+    l
+}
+
+/// Whether a `width` x `height` BC7 texture can be uploaded as blocks to a device whose
+/// largest texture is `max_dim`: the first level that fits has whole blocks (level 0
+/// always has; a texture above the device's limit starts lower, at a size that may not
+/// be, and is then decoded to RGBA8).
+pub fn bc7_uploads_as_blocks(width: u32, height: u32, max_dim: u32) -> bool {
+    let (w, h) = level_size(width, height, first_level(width, height, max_dim));
+    w % 4 == 0 && h % 4 == 0
+}
+
 /// Bytes of the BC7 blocks of a `width` x `height` level (whole 4x4 blocks: a 2x1 level
 /// is one block, as GPUs store it).
 pub fn bc7_level_bytes(width: u32, height: u32) -> usize {
