@@ -339,6 +339,18 @@ fn codecs() -> Vec<Codec> {
         Some(9),
         ispc_bc7(bc7::opaque_ultra_fast_settings),
     ));
+    v.push(block_codec(
+        "bc7 ispc ultra_fast +zstd3",
+        GpuFormat::Bc7,
+        Some(3),
+        ispc_bc7(bc7::opaque_ultra_fast_settings),
+    ));
+    v.push(block_codec(
+        "bc7 ispc ultra_fast +zstd1",
+        GpuFormat::Bc7,
+        Some(1),
+        ispc_bc7(bc7::opaque_ultra_fast_settings),
+    ));
 
     v.push(block_codec(
         "bc7 ispc basic",

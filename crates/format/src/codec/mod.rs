@@ -158,10 +158,14 @@ pub struct PatchTexture {
     pub blocks: Vec<Vec<u8>>,
 }
 
-/// zstd level of BC7 blocks: 9 stores 0.88 bytes a texel on the scissors' texture at
-/// 18 Mtexel/s with the encoder (level 3: within 2% of the bytes, measured by
-/// `bench_texcodecs`); decoding runs at ~700 Mtexel/s whatever the level.
-pub const BC7_ZSTD_LEVEL: i32 = 9;
+/// zstd level of BC7 blocks. Measured by `bench_texcodecs` on a 1024x1024 crop of the
+/// scissors' photo with the builder's encoder (one thread): level 3 stores 0.93 bytes a
+/// texel (mips included) at 24 Mtexel/s of encoding and zstd together; level 9 0.88 at
+/// 14 Mtexel/s, level 1 1.02 at 29. On `scripts/bench-textures` (2.0 GiB of source
+/// texels, 2 cores, alternated runs): level 3 builds in 47-54 s for 818 MB, level 9 in
+/// 64-70 s for 761 MB (PNG: 42 s, 863 MB). 3: 7% more bytes cost less than a third
+/// more build time. Decoding runs at 550-800 Mtexel/s whatever the level.
+pub const BC7_ZSTD_LEVEL: i32 = 3;
 
 impl PatchTexture {
     /// Encodes RGBA8 texels with `codec` (`quality` 1..=100 for JPEG; JPEG drops alpha).
@@ -490,7 +494,17 @@ pub fn encode_patch(patch: &PatchData, attributes: u32, quant_min: [u32; 3]) -> 
         if attributes & ATTR_COLORS != 0 {
             sections[SEC_COLORS] = encode_vertices(&patch.colors);
         }
-        if attributes & ATTR_UVS != 0 {
+        if textured {
+            // In the patch texture's space (see [`TEXEL_UV_FRACTIONS`]).
+            let t = patch.texture.as_ref().expect("checked");
+            let codes: Vec<[u16; 2]> = patch
+                .uvs
+                .iter()
+                .zip(&patch.chart_ids)
+                .map(|(&uv, &c)| texel_uv_code(uv, &patch.charts[c as usize], t.width, t.height))
+                .collect();
+            sections[SEC_UVS] = encode_vertices(&codes);
+        } else if attributes & ATTR_UVS != 0 {
             let codes: Vec<[u32; 2]> = patch.uvs.iter().map(|uv| uv_code(*uv)).collect();
             sections[SEC_UVS] = encode_vertices(&codes);
         }
@@ -610,8 +624,48 @@ fn uv_from_code(c: [u32; 2]) -> [f32; 2] {
     c.map(|z| (unzigzag(z) as f64 / f64::from(1u32 << UV_FRACTION_BITS)) as f32)
 }
 
-/// `uv` as a patch stores it (the builder snaps UVs first, so the texture it cuts and the
-/// UVs a reader decodes agree exactly).
+/// Texture coordinates of textured patches are stored where they land in the patch's
+/// own texture (through their chart), on a grid of `1/TEXEL_UV_FRACTIONS` of its texel,
+/// as u16 pairs: the GPU samples through 16-bit coordinates anyway (1/16 texel of a
+/// 4096-texel texture), and 1/8 texel is far below what filtering shows. On the
+/// scissors this stores the UVs in about 55% of the bytes of source UVs on the 2^-20
+/// grid. Readers map them back to source UVs through the chart (within 1/16 texel of
+/// the patch texture), so the decoded patch has source UVs as before.
+pub const TEXEL_UV_FRACTIONS: u32 = 8;
+
+/// The stored code of `uv` of a vertex of `chart` in a `w` x `h` patch texture:
+/// `round(chart.map(uv) * size * TEXEL_UV_FRACTIONS)`, clamped to the texture. A
+/// solid-colour chart (scale 0) stores 0.
+fn texel_uv_code(uv: [f32; 2], chart: &TextureChart, w: u32, h: u32) -> [u16; 2] {
+    if chart.scale == [0.0, 0.0] {
+        return [0, 0];
+    }
+    let t = chart.map(uv);
+    let q = |v: f32, n: u32| {
+        let span = f64::from(n * TEXEL_UV_FRACTIONS);
+        (f64::from(v) * span).round().clamp(0.0, span.min(65535.0)) as u16
+    };
+    [q(t[0], w), q(t[1], h)]
+}
+
+/// The source UV a stored code stands for (the inverse of [`texel_uv_code`]'s map; 0
+/// on an axis the chart does not scale).
+fn uv_from_texel_code(c: [u16; 2], chart: &TextureChart, w: u32, h: u32) -> [f32; 2] {
+    let axis = |k: usize, n: u32| {
+        let t = f64::from(c[k]) / f64::from(n * TEXEL_UV_FRACTIONS);
+        let s = f64::from(chart.scale[k]);
+        if s == 0.0 {
+            0.0
+        } else {
+            ((t - f64::from(chart.offset[k])) / s) as f32
+        }
+    };
+    [axis(0, w), axis(1, h)]
+}
+
+/// `uv` as a patch of a model without textures stores it (the builder snaps UVs first,
+/// so the texture it cuts and the UVs a reader decodes agree exactly; textured patches
+/// store them in their texture's space: [`TEXEL_UV_FRACTIONS`]).
 pub fn stored_uv(uv: [f32; 2]) -> [f32; 2] {
     uv_from_code(uv_code(uv))
 }
@@ -858,7 +912,19 @@ pub fn decode_patch_with(
     if attributes & ATTR_COLORS != 0 {
         patch.colors = decode_vertices(secs[SEC_COLORS], nu, "colors")?;
     }
-    if attributes & ATTR_UVS != 0 {
+    if textured {
+        (patch.charts, patch.chart_ids) = decode_charts(secs[SEC_CHARTS], nu)?;
+        let [w, h] = texture_size.map(u32::from);
+        let codes: Vec<[u16; 2]> = decode_vertices(secs[SEC_UVS], nu, "uvs")?;
+        patch.uvs = codes
+            .iter()
+            .zip(&patch.chart_ids)
+            .map(|(&c, &id)| uv_from_texel_code(c, &patch.charts[id as usize], w, h))
+            .collect();
+        if patch.uvs.iter().flatten().any(|v| !v.is_finite()) {
+            return Err(corrupt("a chart maps texture coordinates to infinity"));
+        }
+    } else if attributes & ATTR_UVS != 0 {
         let codes: Vec<[u32; 2]> = decode_vertices(secs[SEC_UVS], nu, "uvs")?;
         patch.uvs = codes.iter().map(|c| uv_from_code(*c)).collect();
     }
@@ -866,7 +932,6 @@ pub fn decode_patch_with(
         patch.morph_targets = decode_morph(secs[SEC_MORPH], &positions)?;
     }
     if textured {
-        (patch.charts, patch.chart_ids) = decode_charts(secs[SEC_CHARTS], nu)?;
         let mut t = decode_texture_block(&bytes[payload_end..], texture_size)?;
         if texels {
             if t.codec == Some(TextureCodec::Bc7) {
