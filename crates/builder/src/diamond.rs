@@ -199,50 +199,6 @@ pub fn simplify(
     (out, if err.is_finite() { err } else { 0.0 })
 }
 
-/// For every merged vertex, the texture coordinate its morph target has (see
-/// [`morph_destinations`]): its own where it stays, else that of the vertex at the
-/// target's position that samples the same texture, the nearest in UV space when a seam
-/// puts several there; its own when none does (it then slides over its texture). The
-/// texture stage sizes each chart to hold these, and the renderer finds the same vertex.
-pub fn target_uvs(m: &Merged, dest: &[u32]) -> Vec<[f32; 2]> {
-    let positions = m.pid.iter().map(|&p| p as usize + 1).max().unwrap_or(0);
-    // Vertices per position id, as a CSR list.
-    let mut start = vec![0u32; positions + 1];
-    for &p in &m.pid {
-        start[p as usize + 1] += 1;
-    }
-    for i in 0..positions {
-        start[i + 1] += start[i];
-    }
-    let mut fill = start.clone();
-    let mut at = vec![0u32; m.pid.len()];
-    for (v, &p) in m.pid.iter().enumerate() {
-        at[fill[p as usize] as usize] = v as u32;
-        fill[p as usize] += 1;
-    }
-    (0..m.vertices.len())
-        .map(|i| {
-            let own = &m.vertices[i];
-            let d = dest[i] as usize;
-            if m.pid[d] == m.pid[i] {
-                return own.uv;
-            }
-            let p = m.pid[d] as usize;
-            at[start[p] as usize..start[p + 1] as usize]
-                .iter()
-                .map(|&j| &m.vertices[j as usize])
-                .filter(|v| v.texture == own.texture)
-                .min_by(|a, b| {
-                    let d2 = |v: &WorkVertex| {
-                        (v.uv[0] - own.uv[0]).powi(2) + (v.uv[1] - own.uv[1]).powi(2)
-                    };
-                    d2(a).total_cmp(&d2(b))
-                })
-                .map_or(own.uv, |v| v.uv)
-        })
-        .collect()
-}
-
 /// What [`repair`] changed.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct RepairCounts {

@@ -13,6 +13,7 @@ use crate::partition::{centroid3, parent_id, read_leaf_faces, tet_id, Leaf, Part
 use crate::patch::{
     grid_to_local, remove_bad_triangles_noting, CacheOrder, Welder, WorkPatch, WorkVertex,
 };
+use crate::recut::{self, ChildTexels, RecutTexture};
 use crate::texture::Baker;
 use crate::timing::{Phase, Phases};
 use crate::{BuildError, BuildOptions, BuildReport, Progress};
@@ -46,6 +47,8 @@ struct NodeInfo {
     texture_size: [u16; 2],
     /// The builder's patch (until the parent encodes it).
     work: Option<SpooledPatch>,
+    /// A re-cut patch's baked texels ([`crate::recut::RecutTexture`], until encoded).
+    recut: Option<SpooledPatch>,
     /// The final encoded patch.
     out: Option<SpooledPatch>,
 }
@@ -252,21 +255,23 @@ impl Ctx<'_> {
             quant_min: quant_min(&p.vertices),
             texture_size: [0, 0],
             work: None,
+            recut: None,
             out: None,
         }
     }
 
-    /// Encode a node's final patch (with its morph targets) into the output spool.
+    /// Encode a node's final patch (with its morph targets) into the output spool. With
+    /// `keep` (its parent is re-cut) returns what the parent's bake reads of it.
     fn emit(
         &self,
         id: TetId,
         p: &WorkPatch,
         morph: Vec<[u32; 3]>,
-        morph_uvs: &[[f32; 2]],
-    ) -> Result<(), BuildError> {
+        keep: bool,
+    ) -> Result<Option<ChildTexels>, BuildError> {
         let baked = match &self.baker {
             Some(b) if !p.vertices.is_empty() => {
-                let (error, leaf) = {
+                let (error, leaf, recut) = {
                     let nodes = self
                         .nodes
                         .lock()
@@ -274,10 +279,21 @@ impl Ctx<'_> {
                     let n = nodes
                         .get(&id)
                         .ok_or_else(|| self.internal_err("emit of unknown node"))?;
-                    (n.error, n.leaf)
+                    (n.error, n.leaf, n.recut)
                 };
-                Some(b.bake(&p.vertices, &p.indices, morph_uvs, error, self.step, leaf)?)
+                Some(match recut {
+                    Some(sp) => {
+                        let t = RecutTexture::from_bytes(&self.work.read(&sp)?)
+                            .ok_or_else(|| self.internal_err("corrupt temporary texture"))?;
+                        b.encode_recut(&p.vertices, t, leaf)?
+                    }
+                    None => b.bake(&p.vertices, &p.indices, error, self.step, leaf)?,
+                })
             }
+            _ => None,
+        };
+        let kept = match (&baked, keep) {
+            (Some(b), true) => Some(ChildTexels::of(p, b, &morph, self.step)),
             _ => None,
         };
         let texture_size = baked.as_ref().map_or([0, 0], |b| {
@@ -321,15 +337,60 @@ impl Ctx<'_> {
         n.quant_min = qmin;
         n.texture_size = texture_size;
         n.work = None;
-        Ok(())
+        n.recut = None;
+        Ok(kept)
+    }
+
+    /// Re-cuts a leaf of a fragmented atlas (see `crate::recut`): its seams welded, its
+    /// own charts, a texture at its source texels' density baked from the source cut.
+    /// The baked texels' place in the work spool; `None` (the leaf unchanged) when the
+    /// leaf has no textured triangles.
+    fn recut_leaf(&self, b: &Baker, p: &mut WorkPatch) -> Result<Option<SpooledPatch>, BuildError> {
+        let cut = b.texels_of(&p.vertices, &p.indices, self.step)?;
+        let source = ChildTexels::of(p, &cut, &[], self.step);
+        if !source.texel.is_finite() {
+            return Ok(None);
+        }
+        let w = recut::weld_uv_seams(&diamond::merge(&[&*p]));
+        let mut welded = WorkPatch {
+            vertices: w.vertices,
+            indices: w.indices,
+        };
+        let frames = recut::parametrise(&mut welded, self.step);
+        welded.optimize(CacheOrder::Fifo);
+        let align = crate::texture::codec_align(b.codec());
+        let mut texel = source.texel;
+        let baked = loop {
+            if let Some(t) = recut::bake(
+                &welded,
+                &frames,
+                std::slice::from_ref(&source),
+                texel,
+                align,
+                self.step,
+                0.0,
+            ) {
+                break t;
+            }
+            texel *= 2.0;
+        };
+        *p = welded;
+        Ok(Some(self.work.append(&baked.to_bytes())?))
     }
 
     /// Load a child's patch: leaves from their bucket (registering the node), internal
     /// nodes from the work spool.
     fn load_child(&self, id: TetId) -> Result<Option<WorkPatch>, BuildError> {
         if let Some(leaf) = self.leaf_of.get(&id) {
-            let p = self.load_leaf(leaf)?;
-            let info = self.leaf_info(id, &p);
+            let mut p = self.load_leaf(leaf)?;
+            let recut = match &self.baker {
+                Some(b) if b.recuts() && recut::fragmented(&p.vertices) => {
+                    self.recut_leaf(b, &mut p)?
+                }
+                _ => None,
+            };
+            let mut info = self.leaf_info(id, &p);
+            info.recut = recut;
             self.nodes
                 .lock()
                 .map_err(|_| self.internal_err("poisoned node map"))?
@@ -372,16 +433,48 @@ impl Ctx<'_> {
         lap.mark(Phase::Children);
         // 2. Merge, lock the outer border, simplify.
         let refs: Vec<&WorkPatch> = kids.iter().map(|k| &k.1).collect();
-        let merged = diamond::merge(&refs);
+        let seamed = diamond::merge(&refs);
         lap.mark(Phase::Merge);
-        let locks = diamond::border_locks(&merged.pid, &merged.indices);
-        lap.mark(Phase::BorderLocks);
         let target: usize = per_tet_tris
             .iter()
             .map(|&n| parent_target(n, self.cfg.node_triangles))
             .sum();
-        let (raw, err_grid) = diamond::simplify(&merged, &locks, target, &self.cfg);
-        lap.mark(Phase::Simplify);
+        // Textured models: a diamond whose source seams hold its simplification back,
+        // or whose children were re-cut, is re-cut (see `crate::recut`): simplified with
+        // the seams welded, its new patches given charts of their own.
+        let child_recut = self.baker.is_some()
+            && kids
+                .iter()
+                .any(|(_, p)| p.vertices.iter().any(|v| recut::is_recut(v.texture)));
+        let fragmented = self.baker.as_ref().is_some_and(Baker::recuts)
+            && !child_recut
+            && recut::fragmented(&seamed.vertices);
+        let mut seam_bound = None;
+        if !child_recut && !fragmented {
+            let locks = diamond::border_locks(&seamed.pid, &seamed.indices);
+            lap.mark(Phase::BorderLocks);
+            let (raw, err) = diamond::simplify(&seamed, &locks, target, &self.cfg);
+            lap.mark(Phase::Simplify);
+            seam_bound = Some((locks, raw, err));
+        }
+        let recut = self.baker.as_ref().is_some_and(Baker::recuts)
+            && (child_recut
+                || fragmented
+                || seam_bound.as_ref().is_some_and(|(_, raw, _)| {
+                    recut::held_back(raw.len() / 3, target, seamed.indices.len() / 3)
+                }));
+        let (welded, locks, raw, err_grid) = match seam_bound {
+            Some((locks, raw, err)) if !recut => (None, locks, raw, err),
+            _ => {
+                let w = recut::weld_uv_seams(&seamed);
+                let locks = diamond::border_locks(&w.pid, &w.indices);
+                lap.mark(Phase::BorderLocks);
+                let (raw, err) = diamond::simplify(&w, &locks, target, &self.cfg);
+                lap.mark(Phase::Simplify);
+                (Some(w), locks, raw, err)
+            }
+        };
+        let merged = welded.as_ref().unwrap_or(&seamed);
         let mut simplified = raw.clone();
         let fixed = diamond::repair(&merged.vertices, &merged.pid, &mut simplified);
         lap.mark(Phase::Repair);
@@ -390,29 +483,21 @@ impl Ctx<'_> {
             Ordering::Relaxed,
         );
         // 3. Morph destinations; the children are now complete and can be written.
-        let dest = diamond::morph_destinations(&merged, &locks, &raw, &simplified);
+        let dest = diamond::morph_destinations(merged, &locks, &raw, &simplified);
         drop(raw);
         lap.mark(Phase::Morph);
         let mut child_err = 0.0f64;
         let mut kid_texels = 0u64;
         let mut balls = Vec::new();
-        let target_uv = self
-            .baker
-            .as_ref()
-            .map(|_| diamond::target_uvs(&merged, &dest));
+        let mut kept: Vec<ChildTexels> = Vec::new();
         for (k, (id, p)) in kids.iter().enumerate() {
-            let morph = merged.child_maps[k]
+            let morph: Vec<[u32; 3]> = merged.child_maps[k]
                 .iter()
                 .map(|&mi| merged.vertices[dest[mi as usize] as usize].q)
                 .collect();
-            let uvs: Vec<[f32; 2]> = match &target_uv {
-                Some(t) => merged.child_maps[k]
-                    .iter()
-                    .map(|&mi| t[mi as usize])
-                    .collect(),
-                None => vec![],
-            };
-            self.emit(*id, p, morph, &uvs)?;
+            if let Some(c) = self.emit(*id, p, morph, recut)? {
+                kept.push(c);
+            }
             let nodes = self
                 .nodes
                 .lock()
@@ -450,10 +535,18 @@ impl Ctx<'_> {
                 .min_by(|&a, &b| d(a).total_cmp(&d(b)))
                 .unwrap_or(0)
         };
-        let mut parts = diamond::split(&merged, &simplified, tets.len(), owner);
+        let mut parts = diamond::split(merged, &simplified, tets.len(), owner);
         lap.mark(Phase::Split);
         // 5. Bounds and saturation.
         let error = err_grid as f64 * self.step + child_err;
+        let frames: Vec<Vec<recut::ChartFrame>> = if recut {
+            parts
+                .iter_mut()
+                .map(|p| recut::parametrise(p, self.step))
+                .collect()
+        } else {
+            Vec::new()
+        };
         let mut tights = Vec::with_capacity(parts.len());
         for p in parts.iter_mut() {
             p.optimize(CacheOrder::Table);
@@ -467,7 +560,15 @@ impl Ctx<'_> {
         // that a coarse patch is refined before its texels show (issue 11). Raised here,
         // before the error is stored, so that it is saturated like the rest: the parent
         // adds it to its own through `child_err`, and the diamond's mates share it.
+        let floor = kept.iter().map(|c| c.texel).fold(f64::INFINITY, f64::min);
         let error = match &self.baker {
+            Some(b) if recut => {
+                let plans: Vec<_> = frames
+                    .iter()
+                    .map(|f| b.plan_recut(f.iter().map(|c| c.extent).collect(), floor))
+                    .collect();
+                crate::texture::budgeted_error(&plans, error, kid_texels)
+            }
             Some(b) => {
                 let plans = parts
                     .iter()
@@ -478,9 +579,35 @@ impl Ctx<'_> {
             None => error,
         };
         lap.mark(Phase::Optimize);
+        // Re-cut patches: their textures baked now, from the children just emitted.
+        let mut recut_textures: Vec<Option<SpooledPatch>> = vec![None; parts.len()];
+        if let (Some(b), true) = (&self.baker, recut) {
+            let align = crate::texture::codec_align(b.codec());
+            for (i, p) in parts.iter().enumerate() {
+                if p.indices.is_empty() {
+                    continue;
+                }
+                let mut texel = recut::texel_for(error, floor);
+                let baked = loop {
+                    if let Some(t) =
+                        recut::bake(p, &frames[i], &kept, texel, align, self.step, error)
+                    {
+                        break t;
+                    }
+                    texel *= 2.0;
+                };
+                recut_textures[i] = Some(self.work.append(&baked.to_bytes())?);
+            }
+        }
+        drop(kept);
+        lap.mark(Phase::Recut);
         let sat = stored(&Sphere::of_balls(&balls), grid.size);
         let diamond_id = self.diamond_ids.fetch_add(1, Ordering::Relaxed);
-        for (t, (p, tight)) in tets.iter().zip(parts.iter().zip(tights)) {
+        for ((t, (p, tight)), recut) in tets
+            .iter()
+            .zip(parts.iter().zip(tights))
+            .zip(recut_textures)
+        {
             let work = self.work.append(&p.to_bytes())?;
             let info = NodeInfo {
                 id: tet_id(t),
@@ -498,6 +625,7 @@ impl Ctx<'_> {
                 quant_min: quant_min(&p.vertices),
                 texture_size: [0, 0],
                 work: Some(work),
+                recut,
                 out: None,
             };
             self.nodes
@@ -627,7 +755,7 @@ pub(crate) fn build_hierarchy(
     for r in 0..6u8 {
         let id = (r, 0u8, 0u64);
         if let Some(p) = ctx.load_child(id)? {
-            ctx.emit(id, &p, Vec::new(), &[])?;
+            ctx.emit(id, &p, Vec::new(), false)?;
         }
     }
     report.degenerate_triangles_removed = ctx.degenerate.load(Ordering::Relaxed);

@@ -24,6 +24,7 @@ mod hierarchy;
 pub mod import;
 pub mod partition;
 pub mod patch;
+pub mod recut;
 pub mod texture;
 mod timing;
 pub mod verify;

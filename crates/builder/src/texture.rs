@@ -3,8 +3,9 @@
 //! Each patch's vertices fall into *charts*: the connected pieces of the patch that
 //! sample one source image (vertices are split at UV seams and between materials, so a
 //! chart is a connected set of vertex indices of one texture). For each chart the
-//! builder takes the rectangle of source texels its UVs cover (its vertices' UVs and
-//! their morph targets' UVs, so geomorphing stays inside it), grown by a gutter so
+//! builder takes the rectangle of source texels its vertices' UVs cover (a vertex
+//! morphs towards the UV of a vertex of its own chart, so geomorphing stays inside it),
+//! grown by a gutter so
 //! filtering never reads a neighbour, at the pyramid level the patch's error needs:
 //! leaves (error 0) take the source texels unaltered, coarser patches the coarsest
 //! box-filtered level whose texel is at most their model-space error. That error is
@@ -56,14 +57,14 @@ use crate::BuildError;
 
 /// Texels of gutter around every chart rectangle (bilinear filtering reads one texel
 /// beyond a chart's edge; mip level 1 of the patch texture reads two).
-const GUTTER: i64 = 2;
+pub(crate) const GUTTER: i64 = 2;
 /// Side of the solid block of one untextured colour.
 const SOLID: i64 = 4;
 /// Most distinct solid colours a patch keeps; more are quantised to 4 bits a channel.
 const MAX_SOLID_COLORS: usize = 1024;
 /// A coarse patch's texel, in units of its model-space error. 1: at the tolerance that
 /// selects the patch, a texel projects to about one tolerance, as its geometry does.
-const TEXEL_PER_ERROR: f64 = 1.0;
+pub(crate) const TEXEL_PER_ERROR: f64 = 1.0;
 /// Most texels of a coarse patch's texture: 512 x 512, 1 MiB as RGBA8 (GoLD bounds each
 /// patch's "texture unit" to a fixed size). Beyond it the patch takes a coarser level
 /// and its error rises to that level's texel. Leaves keep the source texels whatever
@@ -88,6 +89,9 @@ pub struct TextureOptions {
     pub codec: TextureCodec,
     /// JPEG quality 1..=100 (ignored for PNG and BC7).
     pub quality: u8,
+    /// Re-cut the diamonds whose source seams hold their simplification back
+    /// ([`crate::recut`]); off: every patch cuts its texture from the source atlas.
+    pub recut: bool,
 }
 
 impl Default for TextureOptions {
@@ -95,6 +99,7 @@ impl Default for TextureOptions {
         TextureOptions {
             codec: TextureCodec::Bc7,
             quality: 90,
+            recut: true,
         }
     }
 }
@@ -111,6 +116,9 @@ pub struct TextureReport {
     pub atlases: u64,
     /// Patches whose texture holds solid colours only (no image).
     pub solid_only: u64,
+    /// Patches given their own charts and a texture baked from their children (coarse
+    /// patches of fragmented atlases: [`crate::recut`]).
+    pub recut: u64,
     /// Patches that took a coarser level than their error asked, to fit
     /// [`MAX_TEXTURE_DIM`].
     pub downsampled_to_fit: u64,
@@ -268,11 +276,14 @@ pub struct BakedTexture {
     pub charts: Vec<TextureChart>,
     pub chart_ids: Vec<u16>,
     pub texture: PatchTexture,
+    /// The texels before encoding (RGBA8, `texture.width` x `texture.height`): what a
+    /// re-cut parent bakes from.
+    pub rgba: Vec<u8>,
 }
 
 /// A rectangle of one image's pyramid level that some charts share.
 #[derive(Clone, Debug)]
-struct Rect {
+pub(crate) struct Rect {
     /// Texture index (into the sources) or `NO_TEXTURE` for a solid colour.
     texture: u32,
     level: usize,
@@ -284,16 +295,39 @@ struct Rect {
     /// Solid colour (when `texture == NO_TEXTURE`).
     color: [u8; 4],
     /// Placement in the patch texture.
-    dx: i64,
-    dy: i64,
+    pub(crate) dx: i64,
+    pub(crate) dy: i64,
 }
 
 impl Rect {
-    fn w(&self) -> i64 {
+    /// A `w` x `h` rectangle of a re-cut chart, to be placed by [`pack`].
+    pub(crate) fn placed(w: i64, h: i64) -> Rect {
+        Rect {
+            texture: crate::recut::RECUT,
+            level: 0,
+            x0: 0,
+            y0: 0,
+            x1: w,
+            y1: h,
+            color: [0; 4],
+            dx: 0,
+            dy: 0,
+        }
+    }
+    pub(crate) fn w(&self) -> i64 {
         self.x1 - self.x0
     }
-    fn h(&self) -> i64 {
+    pub(crate) fn h(&self) -> i64 {
         self.y1 - self.y0
+    }
+    /// Whether one rectangle around both holds no more texels than the two apart: two
+    /// charts sharing texels are cut once, but two neighbours of an atlas whose gutters
+    /// touch are not (merged in a chain, a shelf of small charts would become one
+    /// rectangle of mostly the atlas's empty space).
+    fn union_pays(&self, o: &Rect) -> bool {
+        let w = self.x1.max(o.x1) - self.x0.min(o.x0);
+        let h = self.y1.max(o.y1) - self.y0.min(o.y0);
+        w * h <= self.w() * self.h() + o.w() * o.h()
     }
     fn overlaps(&self, o: &Rect) -> bool {
         self.texture == o.texture
@@ -354,12 +388,12 @@ impl Chart {
 }
 
 /// The charts of a patch (textured vertices only: those whose image can be read) and
-/// each vertex's chart (`usize::MAX` for the others). `target_uvs`, when not empty,
-/// widen each chart's UV bounds by its vertices' morph targets.
+/// each vertex's chart (`usize::MAX` for the others). A vertex morphs towards the UV of
+/// a vertex of its own chart (`tessera_render::morph_targets`), so its chart's bounds
+/// already hold its target's.
 fn find_charts(
     vertices: &[WorkVertex],
     indices: &[u32],
-    target_uvs: &[[f32; 2]],
     step: f64,
     pyramids: &Pyramids,
 ) -> (Vec<Chart>, Vec<usize>) {
@@ -400,15 +434,10 @@ fn find_charts(
             charts.len() - 1
         });
         vertex_chart[i] = c;
-        let mut grow = |uv: [f32; 2]| {
-            for a in 0..2 {
-                charts[c].umin[a] = charts[c].umin[a].min(uv[a] as f64);
-                charts[c].umax[a] = charts[c].umax[a].max(uv[a] as f64);
-            }
-        };
-        grow(vertices[i].uv);
-        if let Some(&t) = target_uvs.get(i) {
-            grow(t);
+        let uv = vertices[i].uv;
+        for a in 0..2 {
+            charts[c].umin[a] = charts[c].umin[a].min(uv[a] as f64);
+            charts[c].umax[a] = charts[c].umax[a].max(uv[a] as f64);
         }
     }
     for t in indices.chunks_exact(3) {
@@ -440,21 +469,31 @@ fn find_charts(
 }
 
 /// What a coarse patch's texture would hold at a given error, known when the patch is
-/// made (its morph targets, which widen its rectangles a little, come with its parent,
-/// when it is baked): the hierarchy raises a diamond's error until its patches'
+/// made (it is baked with its parent, which gives it its morph targets): the hierarchy raises a diamond's error until its patches'
 /// textures fit the texel budget (see [`budgeted_error`]).
 pub struct TexturePlan<'a> {
     baker: &'a Baker,
     charts: Vec<Chart>,
     pyramids: Pyramids,
+    /// A re-cut patch's charts instead (see [`crate::recut`]): their extents in model
+    /// units, and the children's finest texel.
+    recut: Option<(Vec<[f64; 2]>, f64)>,
 }
 
 impl TexturePlan<'_> {
     /// Texels of the texture a patch of error `error` would have: its image rectangles
     /// (gutters included, overlaps merged) packed as [`Baker::bake`] packs them, without
-    /// the few solid-colour texels or the morph targets' UVs; `u64::MAX` when they would
+    /// the few solid-colour texels; `u64::MAX` when they would
     /// not fit in [`MAX_TEXTURE_DIM`].
     pub fn texels(&self, error: f64) -> u64 {
+        if let Some((extents, floor)) = &self.recut {
+            let align = codec_align(self.baker.options.codec);
+            return crate::recut::planned_texels(
+                extents,
+                crate::recut::texel_for(error, *floor),
+                align,
+            );
+        }
         if self.charts.is_empty() {
             return 0;
         }
@@ -478,6 +517,22 @@ impl TexturePlan<'_> {
     /// survives the error's rounding to `f32`.
     pub fn steps(&self) -> Vec<f64> {
         let mut steps = Vec::new();
+        if let Some((extents, floor)) = &self.recut {
+            // Texels shrink continuously with the error: steps of a quarter octave from
+            // the children's texel (or the largest chart's 1/4096) up.
+            let largest = extents.iter().flatten().fold(0.0f64, |a, &b| a.max(b));
+            let base = if floor.is_finite() {
+                *floor
+            } else {
+                largest / 4096.0
+            };
+            if base > 0.0 {
+                for k in 0..=96 {
+                    steps.push(base * 2f64.powf(k as f64 / 4.0) / TEXEL_PER_ERROR * (1.0 + 1e-6));
+                }
+            }
+            return steps;
+        }
         for c in &self.charts {
             let (Some(texel), Some(Some(p))) = (c.texel(), self.pyramids.get(&c.texture)) else {
                 continue;
@@ -561,6 +616,11 @@ impl Baker {
     pub fn spool_in(mut self, dir: &Path) -> Baker {
         self.spool_dir = dir.to_path_buf();
         self
+    }
+
+    /// Whether diamonds held back by their seams are re-cut.
+    pub fn recuts(&self) -> bool {
+        self.options.recut
     }
 
     /// The codec of every texture it bakes.
@@ -723,25 +783,97 @@ impl Baker {
         step: f64,
     ) -> Result<TexturePlan<'_>, BuildError> {
         let pyramids = self.pyramids_of(vertices)?;
-        let (charts, _) = find_charts(vertices, indices, &[], step, &pyramids);
+        let (charts, _) = find_charts(vertices, indices, step, &pyramids);
         Ok(TexturePlan {
             baker: self,
             charts,
             pyramids,
+            recut: None,
         })
     }
 
-    /// The texture of one patch. `target_uvs` (empty for roots) holds each vertex's
-    /// morph target's UV; `error` is the patch's model-space error (0 for leaves) and
-    /// `step` the model units per grid step.
+    /// The plan of a re-cut patch with charts of `extents` (model units) whose
+    /// children's finest texel is `floor` (see [`crate::recut`]).
+    pub fn plan_recut(&self, extents: Vec<[f64; 2]>, floor: f64) -> TexturePlan<'_> {
+        TexturePlan {
+            baker: self,
+            charts: Vec::new(),
+            pyramids: Pyramids::default(),
+            recut: Some((extents, floor)),
+        }
+    }
+
+    /// Encodes a `w` x `h` RGBA8 patch texture with the baker's codec, counting it.
+    fn encode(&self, w: u32, h: u32, rgba: &[u8], leaf: bool) -> Result<PatchTexture, BuildError> {
+        let texture = match self.options.codec {
+            TextureCodec::Bc7 => encode_bc7(w, h, rgba)?,
+            codec => PatchTexture::encode(w, h, rgba, codec, self.options.quality)?,
+        };
+        let texels = u64::from(w) * u64::from(h);
+        self.texels.fetch_add(texels, Ordering::Relaxed);
+        if leaf {
+            self.leaf_texels.fetch_add(texels, Ordering::Relaxed);
+        }
+        self.bytes
+            .fetch_add(texture.encoded.len() as u64, Ordering::Relaxed);
+        Ok(texture)
+    }
+
+    /// The texture of a re-cut patch (`vertices` carry their charts in `texture`), from
+    /// its baked texels.
+    pub fn encode_recut(
+        &self,
+        vertices: &[WorkVertex],
+        baked: crate::recut::RecutTexture,
+        leaf: bool,
+    ) -> Result<BakedTexture, BuildError> {
+        let texture = self.encode(baked.width, baked.height, &baked.rgba, leaf)?;
+        if let Ok(mut r) = self.report.lock() {
+            r.recut += 1;
+        }
+        Ok(BakedTexture {
+            chart_ids: vertices
+                .iter()
+                .map(|v| crate::recut::chart_of(v.texture) as u16)
+                .collect(),
+            charts: baked.charts,
+            texture,
+            rgba: baked.rgba,
+        })
+    }
+
+    /// The texture of one patch. `error` is the patch's model-space error (0 for leaves)
+    /// and `step` the model units per grid step.
     pub fn bake(
         &self,
         vertices: &[WorkVertex],
         indices: &[u32],
-        target_uvs: &[[f32; 2]],
         error: f64,
         step: f64,
         leaf: bool,
+    ) -> Result<BakedTexture, BuildError> {
+        self.cut(vertices, indices, error, step, leaf, true)
+    }
+
+    /// The texels [`Baker::bake`] would encode, not encoded nor counted (`texture`
+    /// holds the size only): what a re-cut leaf is baked from.
+    pub fn texels_of(
+        &self,
+        vertices: &[WorkVertex],
+        indices: &[u32],
+        step: f64,
+    ) -> Result<BakedTexture, BuildError> {
+        self.cut(vertices, indices, 0.0, step, true, false)
+    }
+
+    fn cut(
+        &self,
+        vertices: &[WorkVertex],
+        indices: &[u32],
+        error: f64,
+        step: f64,
+        leaf: bool,
+        encode: bool,
     ) -> Result<BakedTexture, BuildError> {
         let n = vertices.len();
         // Which textures can be read.
@@ -749,7 +881,7 @@ impl Baker {
         let textured = |v: &WorkVertex| {
             v.texture != NO_TEXTURE && matches!(pyramids.get(&v.texture), Some(Some(_)))
         };
-        let (charts, vertex_chart) = find_charts(vertices, indices, target_uvs, step, &pyramids);
+        let (charts, vertex_chart) = find_charts(vertices, indices, step, &pyramids);
         // The level each chart wants.
         let wanted: Vec<usize> = charts.iter().map(|c| c.level_for(error, leaf)).collect();
         // Solid colours of the untextured vertices.
@@ -912,19 +1044,19 @@ impl Baker {
                     }
                 })
                 .collect();
-            let texture = match self.options.codec {
-                TextureCodec::Bc7 => encode_bc7(aw as u32, ah as u32, &rgba)?,
-                codec => {
-                    PatchTexture::encode(aw as u32, ah as u32, &rgba, codec, self.options.quality)?
-                }
-            };
-            let texels = (aw * ah) as u64;
-            self.texels.fetch_add(texels, Ordering::Relaxed);
-            if leaf {
-                self.leaf_texels.fetch_add(texels, Ordering::Relaxed);
+            if !encode {
+                return Ok(BakedTexture {
+                    charts: maps,
+                    chart_ids,
+                    texture: PatchTexture {
+                        width: aw as u32,
+                        height: ah as u32,
+                        ..Default::default()
+                    },
+                    rgba,
+                });
             }
-            self.bytes
-                .fetch_add(texture.encoded.len() as u64, Ordering::Relaxed);
+            let texture = self.encode(aw as u32, ah as u32, &rgba, leaf)?;
             if let Ok(mut r) = self.report.lock() {
                 let images = rects.iter().filter(|r| r.texture != NO_TEXTURE).count();
                 if images == 0 {
@@ -940,6 +1072,7 @@ impl Baker {
                 charts: maps,
                 chart_ids,
                 texture,
+                rgba,
             });
         }
     }
@@ -970,7 +1103,7 @@ fn merge_overlapping(rects: &mut Vec<Rect>, rect_of_chart: &mut [usize]) {
         while i < rects.len() {
             let mut j = i + 1;
             while j < rects.len() {
-                if rects[i].overlaps(&rects[j]) {
+                if rects[i].overlaps(&rects[j]) && rects[i].union_pays(&rects[j]) {
                     let o = rects.swap_remove(j);
                     let r = &mut rects[i];
                     r.x0 = r.x0.min(o.x0);
@@ -1004,7 +1137,7 @@ fn merge_overlapping(rects: &mut Vec<Rect>, rect_of_chart: &mut [usize]) {
 /// blocks at a multiple of `align` ([`cell`]), and the texture's sides are multiples of
 /// it: no block holds texels of two rectangles, so a block codec never mixes their
 /// colours (the cell's padding repeats the rectangle's last row and column).
-fn pack(rects: &mut [Rect], align: i64) -> Option<(i64, i64)> {
+pub(crate) fn pack(rects: &mut [Rect], align: i64) -> Option<(i64, i64)> {
     let max = MAX_TEXTURE_DIM as i64;
     let area: i64 = rects
         .iter()
@@ -1041,12 +1174,12 @@ fn pack(rects: &mut [Rect], align: i64) -> Option<(i64, i64)> {
 }
 
 /// `n` rounded up to a multiple of `align`.
-fn cell(n: i64, align: i64) -> i64 {
+pub(crate) fn cell(n: i64, align: i64) -> i64 {
     (n + align - 1) / align * align
 }
 
 /// The packing alignment of `codec`'s textures: 4 x 4 blocks for BC7, none otherwise.
-fn codec_align(codec: TextureCodec) -> i64 {
+pub(crate) fn codec_align(codec: TextureCodec) -> i64 {
     match codec {
         TextureCodec::Bc7 => 4,
         TextureCodec::Png | TextureCodec::Jpeg => 1,
@@ -1147,17 +1280,22 @@ mod tests {
         let mut rects = vec![
             rect(0, 0, 0, 10, 10),
             rect(0, 50, 50, 60, 60),
-            rect(0, 5, 5, 20, 20),
+            rect(0, 2, 2, 12, 12),
             rect(1, 0, 0, 10, 10),
+            // Overlaps the first two corners only (gutters touching in an atlas): one
+            // rectangle around both would hold more texels than the two apart.
+            rect(0, 8, 8, 30, 30),
         ];
-        let mut of = vec![0, 1, 2, 3];
+        let mut of = vec![0, 1, 2, 3, 4];
         merge_overlapping(&mut rects, &mut of);
-        assert_eq!(rects.len(), 3);
+        assert_eq!(rects.len(), 4);
         assert_eq!(of[0], of[2]);
         let r = &rects[of[0]];
-        assert_eq!((r.x0, r.y0, r.x1, r.y1), (0, 0, 20, 20));
+        assert_eq!((r.x0, r.y0, r.x1, r.y1), (0, 0, 12, 12));
         assert_eq!(rects[of[1]].x0, 50);
         assert_eq!(rects[of[3]].texture, 1);
+        let r = &rects[of[4]];
+        assert_eq!((r.x0, r.y0, r.x1, r.y1), (8, 8, 30, 30));
     }
 
     #[test]

@@ -26,6 +26,8 @@ pub(crate) enum Phase {
     Split,
     /// Parent patches optimised, bounds computed.
     Optimize,
+    /// Re-cut parent patches' textures baked.
+    Recut,
     /// Parent patches written to the work spool.
     Spool,
 }
@@ -44,6 +46,7 @@ const NAMES: [&str; PHASES] = [
     "emit",
     "split",
     "optimize",
+    "recut",
     "spool",
 ];
 

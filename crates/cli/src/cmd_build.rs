@@ -56,6 +56,11 @@ pub struct Args {
     /// decoded and mipmapped at load) or jpeg (the smallest files).
     #[arg(long, default_value = "bc7", value_parser = ["bc7", "png", "jpeg"])]
     texture_codec: String,
+    /// Cut every patch's texture from the source atlas, even where its seams hold the
+    /// simplification back (by default such diamonds get charts of their own and
+    /// textures baked from their children).
+    #[arg(long)]
+    no_recut: bool,
     /// JPEG quality of patch textures (1..=100).
     #[arg(long, default_value_t = 90, value_parser = clap::value_parser!(u8).range(1..=100))]
     texture_quality: u8,
@@ -86,6 +91,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
                 _ => tessera_format::TextureCodec::Bc7,
             },
             quality: a.texture_quality,
+            recut: !a.no_recut,
         },
     };
     let bars = Bars::new(a.quiet || a.json);
@@ -129,6 +135,7 @@ pub fn report_json(r: &BuildReport) -> serde_json::Value {
             "bytes_per_source_texel": t.bytes as f64 / t.source_texels.max(1) as f64,
             "crops": t.crops,
             "atlases": t.atlases,
+            "recut": t.recut,
             "solid_only": t.solid_only,
             "downsampled_to_fit": t.downsampled_to_fit,
             "unreadable_images": t.unreadable_images,
@@ -187,9 +194,10 @@ fn print_report(out: &std::path::Path, r: &BuildReport) {
             t.bytes as f64 / t.source_texels.max(1) as f64
         );
         println!(
-            "               {} crops, {} atlases, {} solid colour only, {} downsampled to fit {} texels",
+            "               {} crops, {} atlases, {} re-cut, {} solid colour only, {} downsampled to fit {} texels",
             t.crops,
             t.atlases,
+            t.recut,
             t.solid_only,
             t.downsampled_to_fit,
             tessera_format::MAX_TEXTURE_DIM

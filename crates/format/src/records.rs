@@ -7,7 +7,7 @@ use bytemuck::{Pod, Zeroable};
 /// First 8 bytes of every model file.
 pub const MAGIC: [u8; 8] = *b"TESSERA\0";
 /// The version this code writes. Readers refuse files with a newer version.
-pub const FORMAT_VERSION: u32 = 4;
+pub const FORMAT_VERSION: u32 = 5;
 /// `Header::attributes` bit: patches carry per-vertex normals.
 pub const ATTR_NORMALS: u32 = 1;
 /// `Header::attributes` bit: patches carry per-vertex RGBA8 colours.

@@ -335,7 +335,8 @@ fn must_catch() -> Vec<Edit> {
         h("version 1", |h| h.version = 1),
         h("version 2", |h| h.version = 2),
         h("version 3", |h| h.version = 3),
-        h("version 5", |h| h.version = 5),
+        h("version 4", |h| h.version = 4),
+        h("version 6", |h| h.version = 6),
         h("texture codec 9", |h| h.texture_codec = 9),
         h("leaf triangles max 0", |h| h.leaf_triangles_max = 0),
         // Fewer than the leaves hold.

@@ -203,8 +203,8 @@ fn corruption_is_detected() {
         matches!(
             e,
             FormatError::UnsupportedVersion {
-                found: 5,
-                supported: 4
+                found: 6,
+                supported: 5
             }
         ),
         "{e}"
@@ -228,7 +228,7 @@ fn corruption_is_detected() {
             e,
             FormatError::OldVersion {
                 found: 1,
-                supported: 4
+                supported: 5
             }
         ),
         "{e}"
@@ -245,7 +245,7 @@ fn corruption_is_detected() {
             e,
             FormatError::OldVersion {
                 found: 3,
-                supported: 4
+                supported: 5
             }
         ) && e.to_string().contains("rebuild"),
         "{e}"

@@ -143,12 +143,10 @@ pub struct MorphTarget<'a> {
     /// target position in the patch, else in one of the siblings. None: found nowhere
     /// (the vertex keeps its own attributes while it moves).
     pub donor: Option<(&'a PatchData, usize)>,
-    /// Textured: the source uv of the survivor at the target position whose chart shows
-    /// the same source image as the vertex's own chart, the nearest to the vertex's own
-    /// source uv among them (a seam splits a survivor into several vertices, one per
-    /// side), to be mapped through the vertex's OWN chart (the builder sized each chart to
-    /// hold its vertices' targets). None: no such survivor (the target keeps the
-    /// vertex's own uv).
+    /// Textured: the source uv of the vertex of this patch at the target position in the
+    /// vertex's own chart (the nearest to the vertex's own uv if several), so the uv it
+    /// morphs along stays in its chart's rectangle. None: no such vertex (the target
+    /// keeps the vertex's own uv, and the texture slides a little while it morphs).
     pub uv: Option<[f32; 2]>,
 }
 
@@ -220,15 +218,19 @@ pub fn morph_targets<'a>(
             };
             let (k, j, _) = entries[head as usize];
             target.donor = Some((sources[k as usize], j as usize));
-            if let (true, Some(own)) = (textured, vertex_chart(p, i)) {
+            if let (true, Some(_)) = (textured, vertex_chart(p, i)) {
                 let own_uv = source_uv(p, i);
                 let mut best: Option<(f32, [f32; 2])> = None;
                 let mut e = head;
+                // Only a vertex of the same chart of this patch: its UV lies in the
+                // chart's rectangle of this patch's texture (a vertex at the same
+                // position in another chart may sample anywhere in the atlas, and a
+                // re-cut chart's UVs are its own plane's).
+                let own_chart = p.chart_ids[i];
                 while e != u32::MAX {
                     let (k, j, next) = entries[e as usize];
-                    let s = sources[k as usize];
-                    if vertex_chart(s, j as usize).is_some_and(|c| c.image == own.image) {
-                        let u = source_uv(s, j as usize);
+                    if k == 0 && p.chart_ids[j as usize] == own_chart {
+                        let u = source_uv(p, j as usize);
                         let d = (u[0] - own_uv[0]).powi(2) + (u[1] - own_uv[1]).powi(2);
                         if best.is_none_or(|(bd, _)| d < bd) {
                             best = Some((d, u));
@@ -1314,10 +1316,11 @@ mod tests {
     }
 
     /// Textured patches: the colour slots carry the chart-mapped uv (clamped), and a
-    /// moving vertex's target uv is the survivor's source uv on the same image, the
-    /// nearest one, mapped through the vertex's own chart; no such survivor, its own.
+    /// moving vertex's target uv is that of the vertex of its own patch and chart at the
+    /// target, the nearest one; no such vertex (another chart, or a sibling's only),
+    /// its own.
     #[test]
-    fn targets_take_the_survivors_uv_on_the_same_image() {
+    fn targets_take_the_uv_of_the_survivor_in_the_same_chart() {
         use tessera_format::TextureChart;
         let chart = |image, scale: f32, offset: [f32; 2]| TextureChart {
             image,
@@ -1325,10 +1328,12 @@ mod tests {
             offset,
         };
         let a = PatchData {
-            // 0: moves onto [8, 0, 0], where 1 (image 2), 2 and 3 (image 0) lie;
+            // 0: moves onto [8, 0, 0], where 1 (chart 1), 2 and 3 (chart 0) lie;
             // 4: moves onto [16, 0, 0] (a survivor of the sibling);
-            // 5: moves onto [24, 0, 0], where only a vertex on another image lies;
-            // 6: stays (target itself); 7: out of its chart's range (clamped).
+            // 5: moves onto [24, 0, 0], where only a vertex of another chart lies;
+            // 6: stays (target itself); 7: out of its chart's range (clamped); 8:
+            // moves onto [8, 0, 0] in chart 2, on the same image as chart 0 (another
+            // rectangle of the atlas).
             positions: vec![
                 [0, 0, 0],
                 [8, 0, 0],
@@ -1338,6 +1343,7 @@ mod tests {
                 [20, 0, 0],
                 [24, 0, 0],
                 [28, 0, 0],
+                [4, 0, 0],
             ],
             uvs: vec![
                 [0.10, 0.10],
@@ -1348,6 +1354,7 @@ mod tests {
                 [0.60, 0.60],
                 [0.70, 0.70],
                 [5.00, -3.0],
+                [0.15, 0.15],
             ],
             morph_targets: vec![
                 [8, 0, 0],
@@ -1358,9 +1365,14 @@ mod tests {
                 [24, 0, 0],
                 [24, 0, 0],
                 [28, 0, 0],
+                [8, 0, 0],
             ],
-            charts: vec![chart(0, 0.5, [0.25, 0.0]), chart(2, 1.0, [0.0, 0.0])],
-            chart_ids: vec![0, 1, 0, 0, 0, 0, 1, 0],
+            charts: vec![
+                chart(0, 0.5, [0.25, 0.0]),
+                chart(2, 1.0, [0.0, 0.0]),
+                chart(0, 0.25, [0.0, 0.5]),
+            ],
+            chart_ids: vec![0, 1, 0, 0, 0, 0, 1, 0, 2],
             indices: vec![0, 1, 2],
             ..Default::default()
         };
@@ -1381,21 +1393,25 @@ mod tests {
         let map0 = |uv: [f32; 2]| [uv[0] * 0.5 + 0.25, uv[1] * 0.5];
         assert!(close(own(0), map0([0.10, 0.10])), "{:?}", own(0));
         assert!(close(own(1), [0.20, 0.20]));
-        // Vertex 0 (image 0): 1 is on image 2; of 2 and 3 (image 0), 3 is nearer.
+        // Vertex 0 (chart 0): 1 is in chart 1; of 2 and 3 (chart 0), 3 is nearer.
         assert!(close(target(0), map0([0.30, 0.25])), "{:?}", target(0));
-        // Vertex 1 (image 2): only itself is on image 2 at [8, 0, 0].
+        // Vertex 1 (chart 1): only itself is in chart 1 at [8, 0, 0].
         assert!(close(target(1), own(1)));
-        // Vertex 4: the sibling's vertex 1 is on image 0 (through its own chart 1); its
-        // source uv mapped through vertex 4's chart.
-        assert!(close(target(4), map0([0.55, 0.50])), "{:?}", target(4));
-        // Vertex 5 (image 0): the only vertex at [24, 0, 0] is on image 2: own uv.
+        // Vertex 4: only the sibling has a vertex at [16, 0, 0]: its own uv (the
+        // sibling's uv may lie outside vertex 4's rectangle of this texture).
+        assert_eq!(out[4].target_color, out[4].color);
+        // Vertex 5: the only vertex at [24, 0, 0] is in chart 1: own uv.
         assert!(close(target(5), own(5)), "{:?} vs {:?}", target(5), own(5));
+        // Vertex 8 (chart 2, the same image as chart 0): no vertex of chart 2 at
+        // [8, 0, 0]: own uv, not chart 0's.
+        assert_eq!(out[8].target_color, out[8].color);
         // Vertex 6 stays; vertex 7's uv is clamped into the texture.
         assert_eq!(out[6].target_color, out[6].color);
         assert!(close(own(7), [1.0, 0.0]), "{:?}", own(7));
-        // Without the sibling, vertex 4 keeps its own uv.
+        // Without the sibling, the same.
         gpu_vertices(&a, &[], 0.5, &mut out);
         assert_eq!(out[4].target_color, out[4].color);
+        assert!(close(unorm16(out[0].target_color), map0([0.30, 0.25])));
         // Untextured, the same patch carries colours (white without any).
         let plain = PatchData {
             charts: vec![],

@@ -118,11 +118,19 @@ impl TextureCodec {
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct TextureChart {
     /// Index of the source texture (the importer's `TextureSource`), `u32::MAX` for a
-    /// solid-colour chart.
+    /// solid-colour chart, [`RECUT_IMAGE`] for a chart of the patch's own
+    /// parametrisation.
     pub image: u32,
     pub scale: [f32; 2],
     pub offset: [f32; 2],
 }
+
+/// [`TextureChart::image`] of a *re-cut* chart: the patch was parametrised afresh and its
+/// texture baked from its children (a coarse patch of a fragmented atlas), so its
+/// vertices' "source UVs" are their coordinates in the chart's own plane (model units
+/// from its corner), not UVs of a source image. A vertex of such a chart morphs towards
+/// the UV of the vertex at its target's position in the same chart of the same patch.
+pub const RECUT_IMAGE: u32 = u32::MAX - 1;
 
 impl TextureChart {
     /// Where `uv` lands in the patch texture.
