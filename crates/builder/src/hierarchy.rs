@@ -299,9 +299,9 @@ impl Ctx<'_> {
         let texture_size = baked.as_ref().map_or([0, 0], |b| {
             [b.texture.width as u16, b.texture.height as u16]
         });
-        let (charts, chart_ids, texture) = match baked {
-            Some(b) => (b.charts, b.chart_ids, Some(b.texture)),
-            None => (vec![], vec![], None),
+        let (charts, chart_ids, texture, chart_planes) = match baked {
+            Some(b) => (b.charts, b.chart_ids, Some(b.texture), b.planes),
+            None => (vec![], vec![], None, vec![]),
         };
         let data = PatchData {
             positions: p.vertices.iter().map(|v| v.q).collect(),
@@ -321,6 +321,7 @@ impl Ctx<'_> {
             charts,
             chart_ids,
             texture,
+            chart_planes,
         };
         let qmin = quant_min(&p.vertices);
         let sp = self
@@ -367,7 +368,6 @@ impl Ctx<'_> {
                 std::slice::from_ref(&source),
                 texel,
                 align,
-                self.step,
                 0.0,
             ) {
                 break t;
@@ -589,9 +589,7 @@ impl Ctx<'_> {
                 }
                 let mut texel = recut::texel_for(error, floor);
                 let baked = loop {
-                    if let Some(t) =
-                        recut::bake(p, &frames[i], &kept, texel, align, self.step, error)
-                    {
+                    if let Some(t) = recut::bake(p, &frames[i], &kept, texel, align, error) {
                         break t;
                     }
                     texel *= 2.0;

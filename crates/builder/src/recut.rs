@@ -179,16 +179,29 @@ pub struct ChartFrame {
     pub min: [f64; 2],
     /// The chart's size along `t` and `b`, model units.
     pub extent: [f64; 2],
+    /// The same map as the file stores it (`PatchData::chart_planes`): UV of grid
+    /// position `q` from `q - qmin`, `qmin` the patch's lowest grid corner.
+    pub plane: [f32; 8],
+    pub qmin: [u32; 3],
+    pub step: f64,
 }
 
 impl ChartFrame {
-    /// Model point `p` in the chart: plane coordinates (model units from its corner) and
-    /// the height along its axis.
-    fn project(&self, p: V3) -> (f64, f64, f64) {
+    /// Grid position `q` in the chart: plane coordinates (model units from its corner,
+    /// as the file's plane gives them) and the height along its axis.
+    fn project(&self, q: [u32; 3]) -> (f64, f64, f64) {
+        let r = [0, 1, 2].map(|k| f64::from(q[k]) - f64::from(self.qmin[k]));
+        let axis = |k: usize| {
+            let p = &self.plane[4 * k..4 * k + 4];
+            r[0] * f64::from(p[0])
+                + r[1] * f64::from(p[1])
+                + r[2] * f64::from(p[2])
+                + f64::from(p[3])
+        };
         (
-            dot(p, self.t) - self.min[0],
-            dot(p, self.b) - self.min[1],
-            dot(p, self.axis),
+            axis(0),
+            axis(1),
+            dot(q.map(|c| c as f64 * self.step), self.axis),
         )
     }
 }
@@ -296,7 +309,11 @@ pub fn parametrise(p: &mut WorkPatch, step: f64) -> Vec<ChartFrame> {
         }
     }
     // Each chart's plane, rotated to the principal axes of its vertices (a tighter
-    // rectangle), and the vertices' UVs in it.
+    // rectangle), and the vertices' UVs in it (through the plane as stored: f32).
+    let qmin = p
+        .vertices
+        .iter()
+        .fold([u32::MAX; 3], |m, v| [0, 1, 2].map(|k| m[k].min(v.q[k])));
     let frames: Vec<ChartFrame> = (0..n_charts)
         .map(|c| {
             let axis = axes[c];
@@ -333,18 +350,32 @@ pub fn parametrise(p: &mut WorkPatch, step: f64) -> Vec<ChartFrame> {
                     max[k] = max[k].max(uv[k]);
                 }
             }
+            let o = qmin.map(|c| c as f64 * step);
+            let plane = [
+                (t[0] * step) as f32,
+                (t[1] * step) as f32,
+                (t[2] * step) as f32,
+                (dot(o, t) - min[0]) as f32,
+                (b[0] * step) as f32,
+                (b[1] * step) as f32,
+                (b[2] * step) as f32,
+                (dot(o, b) - min[1]) as f32,
+            ];
             ChartFrame {
                 axis,
                 t,
                 b,
                 min,
                 extent: [max[0] - min[0], max[1] - min[1]],
+                plane,
+                qmin,
+                step,
             }
         })
         .collect();
     for v in vertices.iter_mut() {
         let f = &frames[chart_of(v.texture)];
-        let (u, w, _) = f.project(v.q.map(|c| c as f64 * step));
+        let (u, w, _) = f.project(v.q);
         v.uv = [u as f32, w as f32];
     }
     p.vertices = vertices;
@@ -521,18 +552,23 @@ pub struct RecutTexture {
     pub height: u32,
     pub rgba: Vec<u8>,
     pub charts: Vec<TextureChart>,
+    /// Each chart's plane ([`ChartFrame::plane`]).
+    pub planes: Vec<[f32; 8]>,
 }
 
 impl RecutTexture {
-    /// For the work spool: width, height, chart count (u32 each), charts (scale and
-    /// offset as f32), RGBA8.
+    /// For the work spool: width, height, chart count (u32 each), charts (scale, offset
+    /// and plane as f32), RGBA8.
     pub fn to_bytes(&self) -> Vec<u8> {
-        let mut b = Vec::with_capacity(12 + self.charts.len() * 16 + self.rgba.len());
+        let mut b = Vec::with_capacity(12 + self.charts.len() * 48 + self.rgba.len());
         for x in [self.width, self.height, self.charts.len() as u32] {
             b.extend_from_slice(&x.to_le_bytes());
         }
-        for c in &self.charts {
-            for f in [c.scale[0], c.scale[1], c.offset[0], c.offset[1]] {
+        for (c, p) in self.charts.iter().zip(&self.planes) {
+            for f in [c.scale[0], c.scale[1], c.offset[0], c.offset[1]]
+                .iter()
+                .chain(p)
+            {
                 b.extend_from_slice(&f.to_le_bytes());
             }
         }
@@ -547,29 +583,39 @@ impl RecutTexture {
             ))
         };
         let (width, height, n) = (u(0)?, u(1)?, u(2)? as usize);
+        let f = |c: usize, k: usize| u(3 + 12 * c + k).map(f32::from_bits);
         let charts = (0..n)
             .map(|c| {
-                let f = |k: usize| u(3 + 4 * c + k).map(f32::from_bits);
                 Some(TextureChart {
                     image: RECUT_IMAGE,
-                    scale: [f(0)?, f(1)?],
-                    offset: [f(2)?, f(3)?],
+                    scale: [f(c, 0)?, f(c, 1)?],
+                    offset: [f(c, 2)?, f(c, 3)?],
                 })
             })
             .collect::<Option<Vec<_>>>()?;
-        let rgba = b.get(12 + 16 * n..)?.to_vec();
+        let planes = (0..n)
+            .map(|c| {
+                let mut p = [0f32; 8];
+                for (k, v) in p.iter_mut().enumerate() {
+                    *v = f(c, 4 + k)?;
+                }
+                Some(p)
+            })
+            .collect::<Option<Vec<_>>>()?;
+        let rgba = b.get(12 + 48 * n..)?.to_vec();
         (rgba.len() == 4 * width as usize * height as usize).then_some(RecutTexture {
             width,
             height,
             rgba,
             charts,
+            planes,
         })
     }
 }
 
 /// Bakes the texture of re-cut patch `p` (parametrised: `frames` are its charts) at
 /// `texel` model units from the diamond's `children`; `align` is the codec's block
-/// (charts on whole blocks), `step` the model units of a grid step, `error` the patch's
+/// (charts on whole blocks), `error` the patch's
 /// model-space error (how far a child's surface may lie from it). `None` when the
 /// charts do not fit [`MAX_TEXTURE_DIM`] at this texel (take a coarser one).
 pub fn bake(
@@ -578,7 +624,6 @@ pub fn bake(
     children: &[ChildTexels],
     texel: f64,
     align: i64,
-    step: f64,
     error: f64,
 ) -> Option<RecutTexture> {
     use crate::texture::{cell, pack, Rect, GUTTER};
@@ -597,7 +642,7 @@ pub fn bake(
     let mut height = vec![f32::NAN; aw_u * ah_u];
     let mut best = vec![f32::INFINITY; aw_u * ah_u];
     let mut color = vec![[0f32; 4]; aw_u * ah_u];
-    let to_texel = |f: &ChartFrame, r: &Rect, q: V3| -> (f64, f64, f64) {
+    let to_texel = |f: &ChartFrame, r: &Rect, q: [u32; 3]| -> (f64, f64, f64) {
         let (u, v, d) = f.project(q);
         (r.dx as f64 + g + u / texel, r.dy as f64 + g + v / texel, d)
     };
@@ -633,11 +678,10 @@ pub fn bake(
             }
         }
     }
-    let model = |v: &WorkVertex| v.q.map(|c| c as f64 * step);
     for t in p.indices.chunks_exact(3) {
         let c = chart_of(p.vertices[t[0] as usize].texture);
         let (f, r) = (&frames[c], &rects[c]);
-        let corners = [t[0], t[1], t[2]].map(|i| to_texel(f, r, model(&p.vertices[i as usize])));
+        let corners = [t[0], t[1], t[2]].map(|i| to_texel(f, r, p.vertices[i as usize].q));
         raster(corners, r, aw_u, |i, l| {
             height[i] = (l[0] * corners[0].2 + l[1] * corners[1].2 + l[2] * corners[2].2) as f32;
         });
@@ -676,7 +720,7 @@ pub fn bake(
                 if dot(n, f.axis) <= 0.0 {
                     continue;
                 }
-                let corners = pos.map(|q| to_texel(f, r, q));
+                let corners = t.map(|i| to_texel(f, r, child.q[i]));
                 raster(corners, r, aw_u, |i, l| {
                     if height[i].is_nan() {
                         return;
@@ -781,6 +825,7 @@ pub fn bake(
         height: ah as u32,
         rgba,
         charts,
+        planes: frames.iter().map(|f| f.plane).collect(),
     })
 }
 
@@ -943,6 +988,7 @@ mod tests {
                     offset: [0.0, 0.125],
                 },
             ],
+            planes: vec![[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0], [0.5; 8]],
         };
         let b = t.to_bytes();
         assert_eq!(RecutTexture::from_bytes(&b), Some(t));

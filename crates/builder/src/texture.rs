@@ -279,6 +279,8 @@ pub struct BakedTexture {
     /// The texels before encoding (RGBA8, `texture.width` x `texture.height`): what a
     /// re-cut parent bakes from.
     pub rgba: Vec<u8>,
+    /// Re-cut patches: each chart's plane (`PatchData::chart_planes`); else empty.
+    pub planes: Vec<[f32; 8]>,
 }
 
 /// A rectangle of one image's pyramid level that some charts share.
@@ -839,6 +841,7 @@ impl Baker {
             charts: baked.charts,
             texture,
             rgba: baked.rgba,
+            planes: baked.planes,
         })
     }
 
@@ -1054,6 +1057,7 @@ impl Baker {
                         ..Default::default()
                     },
                     rgba,
+                    planes: Vec::new(),
                 });
             }
             let texture = self.encode(aw as u32, ah as u32, &rgba, leaf)?;
@@ -1073,6 +1077,7 @@ impl Baker {
                 chart_ids,
                 texture,
                 rgba,
+                planes: Vec::new(),
             });
         }
     }

@@ -35,7 +35,7 @@
 //! Textured models (issue 11): the YCB scissors scan with a texture per patch converges
 //! in the page to `tessera render --complete`'s cut and pixels (PNG textures decoded in
 //! wasm, drawn through WebGL2), the `--ignore-textures` build of it far below; the HUD's
-//! GPU figure counts the textures, and a device limited to 2048-texel textures uploads
+//! GPU figure counts the textures, and a device limited to 1024-texel textures uploads
 //! the 3993-texel one from its first mip that fits.
 //!
 //! The three.js adapter (issue 13, `web/tessera-three.js` on the wasm `Stream`): the
@@ -1723,7 +1723,7 @@ fn a_truncated_model_and_a_dropped_connection_show_clear_messages() {
 /// PSNR the browser's frame of the textured scissors must reach against `tessera render
 /// --complete` of the same camera. Measured (Chromium 156, ANGLE on SwiftShader vs
 /// lavapipe, 480x360, the same cut of 15,108 triangles with leaves): 52.7 dB, and 52.7 dB
-/// again on a device limited to 2048-texel textures (the view samples mips far below the
+/// again on a device limited to 1024-texel textures (the view samples mips far below the
 /// level it skips); the untextured scan's page scores 16.1 dB against that render (49.2 dB
 /// against its own). 35 dB, the Bunny's bound, leaves the same room for other
 /// rasterisers and texture filtering, and is 19 dB above the negative control. A
@@ -1740,7 +1740,7 @@ const SCISSORS_CAMERA: &str = r#"{"position": [-0.03, -0.02, 0.20], "target": [-
 /// their textures through WebGL2 (decoded from PNG in wasm, mips made at upload) as
 /// `tessera render --complete` of the same camera; the same scan built with
 /// `--ignore-textures` (the negative control) scores clearly below the threshold. The
-/// HUD's GPU figure counts the textures. A device whose largest texture is 2048
+/// HUD's GPU figure counts the textures. A device whose largest texture is 1024
 /// (WebGL2's guaranteed minimum; `maxTextureDim`, embed.html) uploads the 3993-texel
 /// texture from its first mip that fits and still draws the same picture.
 #[test]
@@ -1791,7 +1791,7 @@ fn the_page_draws_a_textured_scan_as_tessera_render() {
         json!([
             {"name": "textured", "url": format!("{base}/?model=/models/scissors.tsr{hash}"),
              "expect": "idle", "screenshot": textured_png, "timeout_ms": 240000, "viewport": [800, 480]},
-            {"name": "max-2048", "url": format!("{base}/embed.html?model=/models/scissors.tsr&maxTextureDim=2048{hash}"),
+            {"name": "max-1024", "url": format!("{base}/embed.html?model=/models/scissors.tsr&maxTextureDim=1024{hash}"),
              "expect": "idle", "screenshot": small_png, "timeout_ms": 240000, "viewport": [800, 480]},
             {"name": "untextured", "url": format!("{base}/?model=/models/plain.tsr{hash}"),
              "expect": "idle", "screenshot": plain_png, "timeout_ms": 240000, "viewport": [800, 480]},
@@ -1839,7 +1839,7 @@ fn the_page_draws_a_textured_scan_as_tessera_render() {
     }
     let (t, small, u, main) = (
         result(&results, "textured"),
-        result(&results, "max-2048"),
+        result(&results, "max-1024"),
         result(&results, "untextured"),
         result(&results, "main-thread"),
     );
@@ -1901,7 +1901,7 @@ fn the_page_draws_a_textured_scan_as_tessera_render() {
         p(&browser_plain, &same),
     );
     eprintln!(
-        "PSNR against tessera render --complete (textured): the page {p_same:.2} dB, with a 2048 texture limit {p_small:.2} dB, the untextured scan's page {p_plain:.2} dB (its own render: {:.2} dB; threshold {MIN_TEXTURED_PSNR_DB} dB)",
+        "PSNR against tessera render --complete (textured): the page {p_same:.2} dB, with a 1024 texture limit {p_small:.2} dB, the untextured scan's page {p_plain:.2} dB (its own render: {:.2} dB; threshold {MIN_TEXTURED_PSNR_DB} dB)",
         p(&browser_plain, &plain_render)
     );
     assert_eq!(
@@ -1949,7 +1949,7 @@ fn the_page_draws_a_textured_scan_as_tessera_render() {
     );
 
     // The device's texture limit: the default device takes the largest texture whole;
-    // one limited to 2048 uploads it from the first mip that fits (each level halves,
+    // one limited to 1024 uploads it from the first mip that fits (each level halves,
     // rounding down), with fewer texture bytes and the same cut and picture.
     let size = |v: &Value| -> [u64; 2] { std::array::from_fn(|i| v[i].as_u64().unwrap()) };
     let (lt, ls) = (&ts["largest_texture"], &ss["largest_texture"]);
@@ -1961,34 +1961,34 @@ fn the_page_draws_a_textured_scan_as_tessera_render() {
         "the view does not draw the model's largest texture: {lt}"
     );
     assert!(
-        u64::from(largest_stored) > 2048,
-        "the scan's largest texture is {largest_stored}: the 2048 limit is not exercised"
+        u64::from(largest_stored) > 1024,
+        "the scan's largest texture is {largest_stored}: the 1024 limit is not exercised"
     );
     assert!(
         ts["max_texture_dim"].as_u64().unwrap() >= u64::from(largest_stored),
         "{ts:#}"
     );
     assert_eq!(size(&lt["uploaded"]), stored, "{lt}");
-    assert_eq!(ss["max_texture_dim"], 2048, "{ss:#}");
+    assert_eq!(ss["max_texture_dim"], 1024, "{ss:#}");
     assert_eq!(ls["stored"], lt["stored"], "{ls}");
     let mut level = 0;
-    while stored[0].max(stored[1]) >> level > 2048 {
+    while stored[0].max(stored[1]) >> level > 1024 {
         level += 1;
     }
     let first_fit = stored.map(|d| (d >> level).max(1));
     assert_eq!(size(&ls["uploaded"]), first_fit, "{ls}");
     assert_eq!(
         ss["triangles"], ts["triangles"],
-        "another cut with the 2048 limit"
+        "another cut with the 1024 limit"
     );
     assert!(
         ss["gpu_texture_bytes"].as_u64().unwrap() < tex,
-        "{} texture bytes with the 2048 limit, {tex} without",
+        "{} texture bytes with the 1024 limit, {tex} without",
         ss["gpu_texture_bytes"]
     );
     assert!(
         p_small >= MIN_TEXTURED_PSNR_DB,
-        "with a 2048 texture limit: {p_small:.2} dB against tessera render"
+        "with a 1024 texture limit: {p_small:.2} dB against tessera render"
     );
 }
 

@@ -58,6 +58,8 @@ const SEC_CHARTS: usize = 6;
 const SECTION_COUNT: usize = 7;
 /// Bytes of one chart record in the charts section.
 const CHART_BYTES: usize = 20;
+/// Bytes of a re-cut chart's plane after the chart ids.
+const PLANE_BYTES: usize = 32;
 /// Bytes of the texture block's own header (codec, reserved, width, height).
 const TEXTURE_HEADER_BYTES: usize = 12;
 /// Most charts a patch may have (chart ids are u16).
@@ -375,6 +377,12 @@ pub struct PatchData {
     pub chart_ids: Vec<u16>,
     /// The patch texture ([`ATTR_TEXTURE`], patches with vertices).
     pub texture: Option<PatchTexture>,
+    /// Per chart, when any chart is re-cut ([`RECUT_IMAGE`]; else empty): the re-cut
+    /// chart's plane, `[tu_x, tu_y, tu_z, cu, tv_x, tv_y, tv_z, cv]`, from which its
+    /// vertices' UVs follow (`u = (q - quant_min) . tu + cu`, likewise v, in f64 and
+    /// rounded to f32; see [`chart_plane_uv`]), so they are not stored; zeros for the
+    /// other charts.
+    pub chart_planes: Vec<[f32; 8]>,
 }
 
 impl PatchData {
@@ -453,6 +461,13 @@ pub fn encode_patch(patch: &PatchData, attributes: u32, quant_min: [u32; 3]) -> 
                 .all(|&c| (c as usize) < patch.charts.len()),
             "chart id out of range"
         );
+        let recut = patch.charts.iter().any(|c| c.image == RECUT_IMAGE);
+        assert!(
+            !recut
+                || (patch.chart_planes.len() == patch.charts.len()
+                    && patch.chart_planes.iter().flatten().all(|v| v.is_finite())),
+            "re-cut charts without their planes"
+        );
         let t = patch
             .texture
             .as_ref()
@@ -530,6 +545,13 @@ pub fn encode_patch(patch: &PatchData, attributes: u32, quant_min: [u32; 3]) -> 
             }
             for id in &patch.chart_ids {
                 c.extend_from_slice(&id.to_le_bytes());
+            }
+            for (ch, plane) in patch.charts.iter().zip(&patch.chart_planes) {
+                if ch.image == RECUT_IMAGE {
+                    for f in plane {
+                        c.extend_from_slice(&f.to_le_bytes());
+                    }
+                }
             }
         }
     }
@@ -643,9 +665,9 @@ pub const TEXEL_UV_FRACTIONS: u32 = 8;
 
 /// The stored code of `uv` of a vertex of `chart` in a `w` x `h` patch texture:
 /// `round(chart.map(uv) * size * TEXEL_UV_FRACTIONS)`, clamped to the texture. A
-/// solid-colour chart (scale 0) stores 0.
+/// solid-colour chart (scale 0) or a re-cut one (its plane gives the UV) stores 0.
 fn texel_uv_code(uv: [f32; 2], chart: &TextureChart, w: u32, h: u32) -> [u16; 2] {
-    if chart.scale == [0.0, 0.0] {
+    if chart.scale == [0.0, 0.0] || chart.image == RECUT_IMAGE {
         return [0, 0];
     }
     let t = chart.map(uv);
@@ -839,7 +861,9 @@ pub fn decode_patch_with(
             None => 0,
             Some(_) if k == SEC_INDICES => index_section_bound(t as u64),
             Some(_) if k == SEC_MORPH => 4 + 5 * n64 + vertex_section_bound(n64, 12),
-            Some(_) if k == SEC_CHARTS => 4 + (CHART_BYTES * MAX_PATCH_CHARTS) as u64 + 2 * n64,
+            Some(_) if k == SEC_CHARTS => {
+                4 + ((CHART_BYTES + PLANE_BYTES) * MAX_PATCH_CHARTS) as u64 + 2 * n64
+            }
             Some(size) => vertex_section_bound(n64, size),
         };
         if exp.is_some() && len == 0 || len > bound {
@@ -921,13 +945,21 @@ pub fn decode_patch_with(
         patch.colors = decode_vertices(secs[SEC_COLORS], nu, "colors")?;
     }
     if textured {
-        (patch.charts, patch.chart_ids) = decode_charts(secs[SEC_CHARTS], nu)?;
+        (patch.charts, patch.chart_ids, patch.chart_planes) = decode_charts(secs[SEC_CHARTS], nu)?;
         let [w, h] = texture_size.map(u32::from);
         let codes: Vec<[u16; 2]> = decode_vertices(secs[SEC_UVS], nu, "uvs")?;
         patch.uvs = codes
             .iter()
             .zip(&patch.chart_ids)
-            .map(|(&c, &id)| uv_from_texel_code(c, &patch.charts[id as usize], w, h))
+            .zip(&rel)
+            .map(|((&c, &id), r)| {
+                let chart = &patch.charts[id as usize];
+                if chart.image == RECUT_IMAGE {
+                    chart_plane_uv(&patch.chart_planes[id as usize], *r)
+                } else {
+                    uv_from_texel_code(c, chart, w, h)
+                }
+            })
             .collect();
         if patch.uvs.iter().flatten().any(|v| !v.is_finite()) {
             return Err(corrupt("a chart maps texture coordinates to infinity"));
@@ -954,13 +986,39 @@ pub fn decode_patch_with(
     Ok(patch)
 }
 
-/// The charts section: `u32 count`, `count` charts, `n` u16 chart ids.
-fn decode_charts(sec: &[u8], n: usize) -> Result<(Vec<TextureChart>, Vec<u16>), FormatError> {
+/// The UV of a vertex of a re-cut chart with `plane` at `rel`, its grid position less
+/// the patch's `quant_min` (see [`PatchData::chart_planes`]).
+pub fn chart_plane_uv(plane: &[f32; 8], rel: [u32; 3]) -> [f32; 2] {
+    let r = rel.map(f64::from);
+    let axis = |k: usize| {
+        let p = &plane[4 * k..4 * k + 4];
+        (r[0] * f64::from(p[0]) + r[1] * f64::from(p[1]) + r[2] * f64::from(p[2]) + f64::from(p[3]))
+            as f32
+    };
+    [axis(0), axis(1)]
+}
+
+/// Charts, chart ids and planes: what [`decode_charts`] reads.
+type Charts = (Vec<TextureChart>, Vec<u16>, Vec<[f32; 8]>);
+
+/// The charts section: `u32 count`, `count` charts, `n` u16 chart ids, then the plane of
+/// every re-cut chart (8 f32 each, in chart order).
+fn decode_charts(sec: &[u8], n: usize) -> Result<Charts, FormatError> {
     let count = le_u32(sec, 0) as usize;
     if sec.len() < 4 || count == 0 || count > MAX_PATCH_CHARTS {
         return Err(corrupt(format!("{count} texture charts")));
     }
-    if sec.len() != 4 + CHART_BYTES * count + 2 * n {
+    let images_end = 4 + CHART_BYTES * count;
+    if sec.len() < images_end {
+        return Err(corrupt(format!(
+            "charts section of {} bytes for {count} charts",
+            sec.len()
+        )));
+    }
+    let recut = (0..count)
+        .filter(|k| le_u32(sec, 4 + CHART_BYTES * k) == RECUT_IMAGE)
+        .count();
+    if sec.len() != images_end + 2 * n + PLANE_BYTES * recut {
         return Err(corrupt(format!(
             "charts section of {} bytes for {count} charts and {n} vertices",
             sec.len()
@@ -984,14 +1042,32 @@ fn decode_charts(sec: &[u8], n: usize) -> Result<(Vec<TextureChart>, Vec<u16>), 
         return Err(corrupt("non-finite texture chart"));
     }
     let ids_at = 4 + CHART_BYTES * count;
-    let ids: Vec<u16> = sec[ids_at..]
+    let planes_at = ids_at + 2 * n;
+    let ids: Vec<u16> = sec[ids_at..planes_at]
         .chunks_exact(2)
         .map(|b| u16::from_le_bytes([b[0], b[1]]))
         .collect();
     if let Some(bad) = ids.iter().find(|&&c| c as usize >= count) {
         return Err(corrupt(format!("chart id {bad} of {count} charts")));
     }
-    Ok((charts, ids))
+    let mut planes = Vec::new();
+    if recut > 0 {
+        let mut at = planes_at;
+        for c in &charts {
+            let mut p = [0f32; 8];
+            if c.image == RECUT_IMAGE {
+                for (k, v) in p.iter_mut().enumerate() {
+                    *v = f(at + 4 * k);
+                }
+                at += PLANE_BYTES;
+                if !p.iter().all(|v| v.is_finite()) {
+                    return Err(corrupt("non-finite re-cut chart plane"));
+                }
+            }
+            planes.push(p);
+        }
+    }
+    Ok((charts, ids, planes))
 }
 
 /// The texture block: codec byte, 3 zero bytes, width, height, the encoded image.
