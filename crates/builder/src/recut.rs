@@ -489,14 +489,29 @@ impl ChildTexels {
         }
     }
 
-    /// Bilinear sample at texture coordinate `uv` of the mip level whose texel is
-    /// closest to (not above) `texel` model units.
+    /// Trilinear sample at texture coordinate `uv` for a footprint of `texel` model
+    /// units: the mip chain at level `log2(texel / own texel)`, as the GPU samples the
+    /// child while it morphs in at its parent's texel detail (docs/morph.md), so the
+    /// parent's texture shows what the child does at that moment.
     fn sample(&self, uv: [f64; 2], texel: f64) -> [f32; 4] {
+        let top = (self.levels.len() - 1) as f64;
         let level = if self.texel.is_finite() && texel > self.texel {
-            ((texel / self.texel).log2().floor() as usize).min(self.levels.len() - 1)
+            (texel / self.texel).log2().clamp(0.0, top)
         } else {
-            0
+            0.0
         };
+        let l0 = level.floor() as usize;
+        let f = (level - l0 as f64) as f32;
+        let a = self.bilinear(l0, uv);
+        if f <= 0.0 || l0 + 1 >= self.levels.len() {
+            return a;
+        }
+        let b = self.bilinear(l0 + 1, uv);
+        [0, 1, 2, 3].map(|k| a[k] + (b[k] - a[k]) * f)
+    }
+
+    /// Bilinear sample of mip `level` at texture coordinate `uv` (edges clamped).
+    fn bilinear(&self, level: usize, uv: [f64; 2]) -> [f32; 4] {
         let (w, h, px) = &self.levels[level];
         let (w, h) = (*w as i64, *h as i64);
         let x = uv[0] * w as f64 - 0.5;

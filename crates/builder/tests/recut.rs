@@ -178,8 +178,8 @@ fn a_fragmented_atlas_simplifies_and_its_recut_textures_show_the_source() {
         t.recut,
         recut.report.nodes
     );
-    // The issue's targets: roots at most 2x, geometry at most 1.5x (with a margin for
-    // this small grid, whose every patch carries its chart records).
+    // The issue's targets: roots at most 2x, geometry at most 1.5x (measured: 1.00x and
+    // 1.14x; the source cut 2.2x and 2.4x).
     assert!(
         recut.root_triangles <= 2 * plain.root_triangles,
         "{} vs {}",
@@ -187,7 +187,7 @@ fn a_fragmented_atlas_simplifies_and_its_recut_textures_show_the_source() {
         plain.root_triangles
     );
     assert!(
-        recut.geometry_bytes_per_triangle <= 1.7 * plain.geometry_bytes_per_triangle,
+        recut.geometry_bytes_per_triangle <= 1.5 * plain.geometry_bytes_per_triangle,
         "{} vs {}",
         recut.geometry_bytes_per_triangle,
         plain.geometry_bytes_per_triangle
@@ -212,7 +212,7 @@ fn a_fragmented_atlas_simplifies_and_its_recut_textures_show_the_source() {
          {worst_leaf:.0}), coarse mean {coarse_mean:.2}"
     );
     // Measured: leaves 0.80 (worst 2; the source cut 0.78, worst 1: colour
-    // quantisation), coarse patches 5.2 (the source cut 2.7: its levels' texels are up
+    // quantisation), coarse patches 4.6 (the source cut 2.7: its levels' texels are up
     // to half the error, a re-cut's are the error).
     assert!(
         leaf_mean < 2.0 && worst_leaf <= 8.0,

@@ -2262,10 +2262,15 @@ fn the_three_js_adapter_streams_the_model_into_a_three_scene() {
 /// measured. The textured scissors measured 49.0 dB with its default BC7 textures
 /// (52.9 with PNG ones): each patch's texture is encoded on its own, so a child drawn at
 /// its parent's texel detail differs from the parent's texture by both block errors.
-const MIN_HELD_PSNR_DB: f64 = 46.0;
+/// Since its top diamonds are re-cut (their source seams held simplification back:
+/// `tessera_build::recut`), 45.0 dB (48.8 built with `--no-recut`): the welded
+/// simplification moves more child vertices onto a survivor in another source chart,
+/// where a vertex keeps its own UV and its texture slides while it morphs. The
+/// controls measure 39.6-41.9 dB.
+const MIN_HELD_PSNR_DB: f64 = 44.0;
 /// PSNR below which the picture changed (the controls: arrivals without morphing, the
-/// converged cut): measured 40.4-41.3 dB.
-const MAX_CHANGED_PSNR_DB: f64 = 45.0;
+/// converged cut): measured 39.6-41.9 dB.
+const MAX_CHANGED_PSNR_DB: f64 = 43.0;
 
 /// Geomorphing in the three.js adapter (issue 13): a patch that refines its parent
 /// comes in at the parent's shape (and, textured, at its texel detail) and blends to its
