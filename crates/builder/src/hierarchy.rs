@@ -358,22 +358,21 @@ impl Ctx<'_> {
             indices: w.indices,
         };
         let frames = recut::parametrise(&mut welded, self.step);
+        if frames.len() > tessera_format::MAX_PATCH_CHARTS {
+            // Keeps the source cut (a leaf this crumpled is rare and small).
+            return Ok(None);
+        }
         welded.optimize(CacheOrder::Fifo);
         let align = crate::texture::codec_align(b.codec());
-        let mut texel = source.texel;
-        let baked = loop {
-            if let Some(t) = recut::bake(
-                &welded,
-                &frames,
-                std::slice::from_ref(&source),
-                texel,
-                align,
-                0.0,
-            ) {
-                break t;
-            }
-            texel *= 2.0;
-        };
+        let baked = recut::bake_fitting(
+            &welded,
+            &frames,
+            std::slice::from_ref(&source),
+            source.texel,
+            align,
+            0.0,
+        )
+        .map_err(BuildError::Internal)?;
         *p = welded;
         Ok(Some(self.work.append(&baked.to_bytes())?))
     }
@@ -547,6 +546,17 @@ impl Ctx<'_> {
         } else {
             Vec::new()
         };
+        if let Some(f) = frames
+            .iter()
+            .find(|f| f.len() > tessera_format::MAX_PATCH_CHARTS)
+        {
+            return Err(BuildError::Internal(format!(
+                "a re-cut patch needs {} texture charts (at most {}): build with \
+                 --no-recut or a smaller --node-triangles",
+                f.len(),
+                tessera_format::MAX_PATCH_CHARTS
+            )));
+        }
         let mut tights = Vec::with_capacity(parts.len());
         for p in parts.iter_mut() {
             p.optimize(CacheOrder::Table);
@@ -587,13 +597,9 @@ impl Ctx<'_> {
                 if p.indices.is_empty() {
                     continue;
                 }
-                let mut texel = recut::texel_for(error, floor);
-                let baked = loop {
-                    if let Some(t) = recut::bake(p, &frames[i], &kept, texel, align, error) {
-                        break t;
-                    }
-                    texel *= 2.0;
-                };
+                let texel = recut::texel_for(error, floor);
+                let baked = recut::bake_fitting(p, &frames[i], &kept, texel, align, error)
+                    .map_err(BuildError::Internal)?;
                 recut_textures[i] = Some(self.work.append(&baked.to_bytes())?);
             }
         }

@@ -632,8 +632,9 @@ impl RecutTexture {
 /// `texel` model units from the diamond's `children`; `align` is the codec's block
 /// (charts on whole blocks), `error` the patch's
 /// model-space error (how far a child's surface may lie from it). `None` when the
-/// charts do not fit [`MAX_TEXTURE_DIM`] at this texel (take a coarser one).
-pub fn bake(
+/// charts do not fit [`MAX_TEXTURE_DIM`] at this texel (take a coarser one:
+/// [`bake_fitting`]).
+fn bake(
     p: &WorkPatch,
     frames: &[ChartFrame],
     children: &[ChildTexels],
@@ -844,6 +845,38 @@ pub fn bake(
     })
 }
 
+/// [`bake`] at `texel` model units, or the first of its doublings at which the charts
+/// fit [`MAX_TEXTURE_DIM`]; a `texel` that is not a positive number (a patch of error 0
+/// whose children have no textured triangles: solid colours only) starts from 1/64 of
+/// its largest chart instead. Errs (rather than loop) if nothing fits.
+pub fn bake_fitting(
+    p: &WorkPatch,
+    frames: &[ChartFrame],
+    children: &[ChildTexels],
+    texel: f64,
+    align: i64,
+    error: f64,
+) -> Result<RecutTexture, String> {
+    let largest = frames.iter().flat_map(|f| f.extent).fold(0.0f64, f64::max);
+    let mut texel = if texel.is_finite() && texel > 0.0 {
+        texel
+    } else if largest > 0.0 {
+        largest / 64.0
+    } else {
+        1.0
+    };
+    for _ in 0..64 {
+        if let Some(t) = bake(p, frames, children, texel, align, error) {
+            return Ok(t);
+        }
+        texel *= 2.0;
+    }
+    Err(format!(
+        "a re-cut patch's {} charts do not fit a {MAX_TEXTURE_DIM}-texel texture",
+        frames.len()
+    ))
+}
+
 /// Texels of the texture of a re-cut patch with charts of `extents` at `texel`, packed
 /// as [`bake`] packs them; `u64::MAX` when they do not fit [`MAX_TEXTURE_DIM`].
 pub fn planned_texels(extents: &[[f64; 2]], texel: f64, align: i64) -> u64 {
@@ -947,6 +980,22 @@ mod tests {
         // Copies only where charts meet: far fewer than one per triangle corner.
         let extra = p.vertices.len() - before.vertices.len();
         assert!(extra < before.vertices.len() / 4, "{extra} copies");
+    }
+
+    #[test]
+    fn a_patch_of_error_zero_over_solid_colours_still_gets_a_finite_texture() {
+        // No textured child (texel infinite) and no error: texel_for gives 0.
+        let mut p = bumpy(8);
+        let frames = parametrise(&mut p, 1e-3);
+        let t = bake_fitting(&p, &frames, &[], texel_for(0.0, f64::INFINITY), 4, 0.0).unwrap();
+        assert!(t.width <= MAX_TEXTURE_DIM && t.height <= MAX_TEXTURE_DIM);
+        assert_eq!(t.rgba.len(), 4 * (t.width * t.height) as usize);
+        assert!(t.charts.iter().all(|c| c
+            .scale
+            .iter()
+            .chain(&c.offset)
+            .all(|v| v.is_finite() && *v >= 0.0)));
+        assert!(t.planes.iter().flatten().all(|v| v.is_finite()));
     }
 
     #[test]
