@@ -491,6 +491,7 @@ mod tests {
                 offset: [0.125, -1.0],
             }],
             chart_ids: vec![0; 3],
+            chart_planes: vec![],
             texture: Some(PatchTexture {
                 width: 4,
                 height: 2,
