@@ -191,18 +191,8 @@ impl ChartFrame {
     /// as the file's plane gives them) and the height along its axis.
     fn project(&self, q: [u32; 3]) -> (f64, f64, f64) {
         let r = [0, 1, 2].map(|k| f64::from(q[k]) - f64::from(self.qmin[k]));
-        let axis = |k: usize| {
-            let p = &self.plane[4 * k..4 * k + 4];
-            r[0] * f64::from(p[0])
-                + r[1] * f64::from(p[1])
-                + r[2] * f64::from(p[2])
-                + f64::from(p[3])
-        };
-        (
-            axis(0),
-            axis(1),
-            dot(q.map(|c| c as f64 * self.step), self.axis),
-        )
+        let [u, v] = tessera_format::chart_plane_at(&self.plane, r);
+        (u, v, dot(q.map(|c| c as f64 * self.step), self.axis))
     }
 }
 

@@ -35,10 +35,10 @@ mod writer;
 pub use atomic::{AtomicFile, AtomicFileError};
 pub use codec::texels;
 pub use codec::{
-    decode_patch, decode_patch_with, encode_patch, oct_decode, oct_encode, stored_uv, PatchData,
-    PatchShape, PatchTexture, TextureChart, TextureCodec, BC7_ZSTD_LEVEL, MAX_PATCH_CHARTS,
-    MAX_PATCH_TRIANGLES, MAX_PATCH_VERTICES, PATCH_CODEC_VERSION, PATCH_FLAG_MORPH,
-    PATCH_FLAG_ZSTD, PATCH_HEADER_BYTES, RECUT_IMAGE, UV_FRACTION_BITS,
+    chart_plane_at, chart_plane_uv, decode_patch, decode_patch_with, encode_patch, oct_decode,
+    oct_encode, stored_uv, PatchData, PatchShape, PatchTexture, TextureChart, TextureCodec,
+    BC7_ZSTD_LEVEL, MAX_PATCH_CHARTS, MAX_PATCH_TRIANGLES, MAX_PATCH_VERTICES, PATCH_CODEC_VERSION,
+    PATCH_FLAG_MORPH, PATCH_FLAG_ZSTD, PATCH_HEADER_BYTES, RECUT_IMAGE, UV_FRACTION_BITS,
 };
 pub use error::FormatError;
 pub use grid::Grid;

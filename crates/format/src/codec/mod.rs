@@ -989,11 +989,16 @@ pub fn decode_patch_with(
 /// The UV of a vertex of a re-cut chart with `plane` at `rel`, its grid position less
 /// the patch's `quant_min` (see [`PatchData::chart_planes`]).
 pub fn chart_plane_uv(plane: &[f32; 8], rel: [u32; 3]) -> [f32; 2] {
-    let r = rel.map(f64::from);
+    chart_plane_at(plane, rel.map(f64::from)).map(|c| c as f32)
+}
+
+/// [`chart_plane_uv`] before its rounding to f32, at any `rel` (the builder also
+/// projects points outside the patch's box, below its `quant_min`): the one formula the
+/// builder's UVs and every reader's share, so they agree exactly.
+pub fn chart_plane_at(plane: &[f32; 8], r: [f64; 3]) -> [f64; 2] {
     let axis = |k: usize| {
         let p = &plane[4 * k..4 * k + 4];
-        (r[0] * f64::from(p[0]) + r[1] * f64::from(p[1]) + r[2] * f64::from(p[2]) + f64::from(p[3]))
-            as f32
+        r[0] * f64::from(p[0]) + r[1] * f64::from(p[1]) + r[2] * f64::from(p[2]) + f64::from(p[3])
     };
     [axis(0), axis(1)]
 }
