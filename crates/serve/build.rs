@@ -72,12 +72,21 @@ fn main() {
         }
     } else {
         // Built later: the directory (or its parent, while it does not exist) changes.
+        // The parent by name, not `dist/..`: a path through a missing directory cannot
+        // be checked, so cargo would run this script (and relink the server) on every
+        // build.
         let watch = if dist.is_dir() {
             dist.clone()
         } else {
-            dist.join("..")
+            dist.parent().map_or_else(|| dist.clone(), PathBuf::from)
         };
         println!("cargo:rerun-if-changed={}", watch.display());
+        println!(
+            "cargo:warning=the browser viewer is not built into this tessera (no {}): \
+             `tessera serve` will serve models but no viewer page; run scripts/build-web, \
+             then build again (or serve one with --web DIR)",
+            dist.join("index.html").display()
+        );
     }
     code += "];\n";
     code += &gzipped;

@@ -118,9 +118,9 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     let frames_dir = dir.join("demo-frames");
     std::fs::create_dir_all(&frames_dir)
         .with_context(|| format!("cannot create {}", frames_dir.display()))?;
-    let scene = tessera_viewer::scene_points(model.as_ref(), 20_000);
+    let scene = tessera_nav::scene_points(model.as_ref(), 20_000);
     let up = scene.guess_up();
-    let orbit = tessera_viewer::orbit_path(&scene, up, a.frames.max(1), 1280, 720)?;
+    let orbit = tessera_nav::orbit_path(&scene, up, a.frames.max(1), 1280, 720)?;
     let mut viewer = Viewer::new(
         model,
         ViewerOptions {

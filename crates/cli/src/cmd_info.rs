@@ -109,7 +109,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     let mut j = info_json(m, &a.model.display().to_string());
     // The extent of the coarsest level (root patches) and the up axis guessed from it,
     // which `view` and `render --orbit` use unless given `--up`.
-    let scene = tessera_viewer::scene_points(model.as_ref(), 1);
+    let scene = tessera_nav::scene_points(model.as_ref(), 1);
     let up = scene.guess_up();
     j["extent"] = json!({ "min": scene.min.to_array(), "max": scene.max.to_array() });
     j["up_guess"] = json!(up.to_string());

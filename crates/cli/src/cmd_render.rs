@@ -107,10 +107,10 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     let shots = match (&a.path, a.orbit) {
         (Some(p), _) => Shots::Path(CameraPath::from_file(p, a.width, a.height)?),
         (None, Some(n)) => {
-            let scene = tessera_viewer::scene_points(model.as_ref(), 20_000);
+            let scene = tessera_nav::scene_points(model.as_ref(), 20_000);
             let up = a.up.unwrap_or_else(|| scene.guess_up());
             Shots::Orbit(
-                tessera_viewer::orbit_path(&scene, up, n, a.width, a.height)
+                tessera_nav::orbit_path(&scene, up, n, a.width, a.height)
                     .context("cannot frame the model for an orbit")?,
             )
         }
@@ -126,12 +126,13 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     } else {
         Mode::Progressive
     };
+    let (gpu_budget_bytes, ram_budget_bytes) = tessera_render::memory_split(a.memory);
     let opts = ViewerOptions {
         tolerance_px: a.tolerance,
         cull: !a.no_cull,
         mode,
-        gpu_budget_bytes: a.memory / 2,
-        ram_budget_bytes: a.memory / 4,
+        gpu_budget_bytes,
+        ram_budget_bytes,
         loader_threads: a.loaders.max(1),
         prefetch: !a.no_prefetch,
         morph: tessera_render::MorphOptions {
@@ -318,7 +319,7 @@ fn report_skipped(viewer: &Viewer, mode: Mode) {
 /// The cameras of a render: a path's frames or an orbit's, one at a time.
 enum Shots {
     Path(CameraPath),
-    Orbit(tessera_viewer::OrbitCameras),
+    Orbit(tessera_nav::OrbitCameras),
 }
 
 impl Shots {

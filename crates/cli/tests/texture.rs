@@ -110,7 +110,7 @@ fn the_textured_scan_builds_verifies_and_renders_its_texture() {
     let p_one = mean_psnr(&one, &full);
     let p_plain = mean_psnr(&untextured, &full);
     eprintln!("1 px vs full resolution {p_one:.2} dB; untextured vs textured {p_plain:.2} dB");
-    // Measured on lavapipe: see the closing numbers in the README (bench-appearance).
+    // Measured on lavapipe: see docs/benchmarks.md (bench-appearance).
     // The bound leaves room for rasteriser differences, and the untextured model (Kd
     // grey) must be far below it: the texture is drawn.
     assert!(p_one >= 34.0, "1 px tolerance: {p_one:.2} dB");

@@ -18,6 +18,7 @@
 #[cfg(feature = "write")]
 mod atomic;
 mod codec;
+mod drawing;
 mod error;
 #[doc(hidden)]
 pub mod fuzzing;
@@ -39,6 +40,10 @@ pub use codec::{
     oct_encode, stored_uv, PatchData, PatchShape, PatchTexture, TextureChart, TextureCodec,
     BC7_ZSTD_LEVEL, MAX_PATCH_CHARTS, MAX_PATCH_TRIANGLES, MAX_PATCH_VERTICES, PATCH_CODEC_VERSION,
     PATCH_FLAG_MORPH, PATCH_FLAG_ZSTD, PATCH_HEADER_BYTES, RECUT_IMAGE, UV_FRACTION_BITS,
+};
+pub use drawing::{
+    morph_targets, patch_is_textured, patch_texel_size, source_uv, texel_lod, vertex_chart,
+    MorphTarget,
 };
 pub use error::FormatError;
 pub use grid::Grid;

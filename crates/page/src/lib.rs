@@ -39,7 +39,10 @@
 //! retries) is answered as [`Answer::Unavailable`] and not remembered: the scheduler
 //! asks for it again after a backoff. Either way the caller keeps drawing its parent.
 
+mod grow;
 mod loader;
+
+pub use grow::ThreadGrower;
 
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::thread::JoinHandle;

@@ -29,16 +29,20 @@ mod texture;
 mod viewer;
 
 pub use cache::{
-    gpu_vertices, gpu_vertices_as, morph_targets, patch_is_textured, patch_texel_size, texel_lod,
-    uv_unorm16, GpuCache, GpuCacheStats, GpuStore, GpuVertex, MorphTarget, Slot,
+    gpu_vertices, gpu_vertices_as, uv_unorm16, GpuCache, GpuCacheStats, GpuStore, GpuVertex, Slot,
 };
 pub use gpu::Gpu;
 pub use renderer::{
-    clip_planes_along, ColorMode, DrawInstance, FrameParams, Light, Renderer, Shading,
-    DEPTH_FORMAT, PATCH_SHADER,
+    ColorMode, DrawInstance, FrameParams, Light, Renderer, Shading, DEPTH_FORMAT, PATCH_SHADER,
+};
+/// The CPU side of drawing a patch (morph targets, texel sizes), in `tessera-format` so
+/// renderers without this crate share it.
+pub use tessera_format::{
+    morph_targets, patch_is_textured, patch_texel_size, texel_lod, MorphTarget,
 };
 pub use tessera_image::{diff_stats, enclosed_background_pixels, psnr, Image, ImageError};
-pub use tessera_stream::{FrameStats, Mode, MorphOptions};
+pub use tessera_select::clip_planes_along;
+pub use tessera_stream::{memory_split, FrameStats, Mode, MorphOptions};
 pub use texture::{
     bc7_uploads_as_blocks, downsample, mip_chain, mip_level_count, texture_bind_group_layout,
     texture_gpu_bytes, texture_gpu_bytes_as, SlotTexture, BC7_TEXTURE_FORMAT, PATCH_TEXTURE_FORMAT,

@@ -15,23 +15,21 @@
 //! The three modes are `tessera_stream::Mode`'s: progressive (never waits), complete
 //! (the whole cut, in several passes if it exceeds the cache) and full resolution.
 
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use glam::DVec3;
 use tessera_format::{ModelIndex, PatchReader, ATTR_COLORS, ATTR_TEXTURE};
-use tessera_page::{Pager, PagerOptions};
+use tessera_page::{Pager, PagerOptions, ThreadGrower};
 use tessera_select::Camera;
 use tessera_stream::{
-    BudgetSplit, CompleteError, ModelDemand, MorphOptions, Scheduler, SchedulerOptions,
+    CompleteError, Driver, MorphOptions, SceneBudgets, SceneStores, Scheduler, SchedulerOptions,
 };
 
 pub use tessera_stream::{FrameStats, Mode};
 
 use crate::cache::{GpuCache, GpuStore};
 use crate::gpu::Gpu;
-use crate::renderer::{clip_planes_along, FrameParams, Renderer, Shading};
+use crate::renderer::{FrameParams, Renderer, Shading};
 use crate::RenderError;
 use tessera_image::Image;
 
@@ -88,44 +86,60 @@ impl Default for ViewerOptions {
     }
 }
 
-/// One model of a [`Viewer`]'s scene: its streaming core, its loader threads and its
-/// per-frame state. Every model has its own local frame (model coordinates minus its
-/// header's cube origin), grid and cube; all share model coordinates.
+/// What the viewer keeps of each model beside the driver's part: the reader, its grid
+/// step and whether it has colours. Every model has its own local frame (model
+/// coordinates minus its header's cube origin), grid and cube; all share model
+/// coordinates.
 struct SceneModel {
     model: Arc<dyn PatchReader>,
-    scheduler: Scheduler,
-    pager: Pager,
     quant_step: f64,
     has_colors: bool,
-    visible: bool,
-    /// A thread reading more of a paged index is running.
-    growing: Arc<AtomicBool>,
-    /// The paged index as grown since `model.index()` was read (None: not grown).
-    grown: Option<Arc<ModelIndex>>,
-    /// This model's part of the last frame.
-    stats: FrameStats,
 }
 
-impl SceneModel {
-    fn index(&self) -> &ModelIndex {
-        self.grown.as_deref().unwrap_or(self.model.index())
-    }
+/// The native driver: the pager's loader threads as each model's patch source, a
+/// thread growing a paged index, the scene's own budgets.
+type NativeDriver = Driver<Pager, ThreadGrower, SceneBudgets>;
 
-    fn cube_origin(&self) -> [f64; 3] {
-        self.model.index().header().cube_origin
+/// The models' views of the one GPU cache, as the driver's stores.
+struct CacheStores<'a> {
+    cache: &'a mut GpuCache,
+    gpu: &'a Gpu,
+    models: &'a [SceneModel],
+}
+
+impl SceneStores for CacheStores<'_> {
+    type Store<'b>
+        = GpuStore<'b>
+    where
+        Self: 'b;
+    fn store(&mut self, model: usize) -> GpuStore<'_> {
+        GpuStore {
+            cache: self.cache,
+            device: &self.gpu.device,
+            queue: &self.gpu.queue,
+            quant_step: self.models[model].quant_step,
+            model: model as u32,
+        }
+    }
+    fn index_grown(&mut self, model: usize, index: &ModelIndex) {
+        self.cache.set_nodes(model as u32, index);
+    }
+    fn usable_bytes(&self) -> u64 {
+        self.cache.usable_bytes()
     }
 }
 
 /// See the module docs. Several models (`Viewer::with_models`) share the device, one
 /// GPU cache (slots keyed by model and node) with one budget, one RAM budget, one
 /// render pass and one depth buffer; each keeps its own scheduler and pager, and the
-/// budgets are split between them every frame by demand (`tessera_stream::BudgetSplit`).
+/// budgets are split between them every frame by demand (the shared
+/// `tessera_stream::Driver`, as the browser's views).
 pub struct Viewer {
     gpu: Gpu,
     renderer: Renderer,
     cache: GpuCache,
     models: Vec<SceneModel>,
-    split: BudgetSplit,
+    driver: NativeDriver,
     opts: ViewerOptions,
     start: Instant,
     /// Near and far planes of the last frame.
@@ -170,100 +184,80 @@ impl Viewer {
         renderer.has_colors = models[0].index().header().attributes & ATTR_COLORS != 0;
         renderer.texel_blend = opts.texel_blend;
         renderer.ensure_models(&gpu.device, models.len() as u32);
-        let cache = GpuCache::new(&gpu.device, opts.gpu_budget_bytes);
-        let scene = models
-            .into_iter()
-            .map(|model| {
-                let scheduler = Scheduler::new(
-                    model.index(),
-                    SchedulerOptions {
-                        tolerance_px: opts.tolerance_px,
-                        cull: opts.cull,
-                        mode: opts.mode,
-                        store_budget_bytes: opts.gpu_budget_bytes,
-                        ram_budget_bytes: opts.ram_budget_bytes,
-                        upload_budget_bytes: opts.upload_budget_bytes,
-                        prefetch: opts.prefetch,
-                        morph: opts.morph.clone(),
-                        ..SchedulerOptions::default()
-                    },
-                );
-                let pager = Pager::new(
-                    model.clone(),
-                    PagerOptions {
-                        threads: opts.loader_threads,
-                        read_delay: opts.read_delay,
-                    },
-                );
-                SceneModel {
-                    quant_step: model.index().grid().step(),
-                    has_colors: model.index().header().attributes & ATTR_COLORS != 0,
-                    model,
-                    scheduler,
-                    pager,
-                    visible: true,
-                    growing: Arc::new(AtomicBool::new(false)),
-                    grown: None,
-                    stats: FrameStats::default(),
-                }
-            })
-            .collect();
-        let mut v = Viewer {
+        let mut cache = GpuCache::new(&gpu.device, opts.gpu_budget_bytes);
+        let mut driver = Driver::new(SceneBudgets::new(
+            opts.gpu_budget_bytes,
+            opts.ram_budget_bytes,
+        ));
+        let mut scene = Vec::with_capacity(models.len());
+        for (i, model) in models.into_iter().enumerate() {
+            let index = model.index();
+            let scheduler = Scheduler::new(
+                index,
+                SchedulerOptions {
+                    tolerance_px: opts.tolerance_px,
+                    cull: opts.cull,
+                    mode: opts.mode,
+                    store_budget_bytes: opts.gpu_budget_bytes,
+                    ram_budget_bytes: opts.ram_budget_bytes,
+                    upload_budget_bytes: opts.upload_budget_bytes,
+                    prefetch: opts.prefetch,
+                    morph: opts.morph.clone(),
+                    ..SchedulerOptions::default()
+                },
+            );
+            let pager = Pager::new(
+                model.clone(),
+                PagerOptions {
+                    threads: opts.loader_threads,
+                    read_delay: opts.read_delay,
+                },
+            );
+            cache.set_nodes(i as u32, index);
+            cache.set_textured(i as u32, index.header().attributes & ATTR_TEXTURE != 0);
+            cache.set_texture_codec(i as u32, index.header().patch_texture_codec());
+            driver.add(scheduler, pager, ThreadGrower::new(model.clone()));
+            scene.push(SceneModel {
+                quant_step: index.grid().step(),
+                has_colors: index.header().attributes & ATTR_COLORS != 0,
+                model,
+            });
+        }
+        // Roots first, each model with the whole budget (they are pinned); then the
+        // first split (no demand yet: an even share of what the roots leave).
+        {
+            let mut stores = CacheStores {
+                cache: &mut cache,
+                gpu: &gpu,
+                models: &scene,
+            };
+            driver.load_roots(&mut stores);
+            let usable = stores.usable_bytes();
+            driver.rebalance(0.0, usable);
+        }
+        Ok(Viewer {
             gpu,
             renderer,
             cache,
             models: scene,
-            split: BudgetSplit::new(opts.gpu_budget_bytes, opts.ram_budget_bytes),
+            driver,
             opts,
             start: Instant::now(),
             planes: (0.0, 0.0),
             last_camera: None,
-        };
-        // Roots first, each model with the whole budget (they are pinned); then the
-        // first split (no demand yet: an even share of what the roots leave).
-        for i in 0..v.models.len() {
-            v.cache.set_nodes(i as u32, v.models[i].index());
-            let textured = v.models[i].index().header().attributes & ATTR_TEXTURE != 0;
-            v.cache.set_textured(i as u32, textured);
-            v.cache
-                .set_texture_codec(i as u32, v.models[i].index().header().patch_texture_codec());
-            let (m, mut store) = v.parts(i);
-            m.scheduler.load_roots(&mut m.pager, &mut store);
-        }
-        if v.models.len() > 1 {
-            v.rebalance(0.0);
-        }
-        Ok(v)
+        })
     }
 
-    /// Model `i` and its view of the shared cache.
-    fn parts(&mut self, i: usize) -> (&mut SceneModel, GpuStore<'_>) {
-        let m = &mut self.models[i];
-        let store = GpuStore {
-            cache: &mut self.cache,
-            device: &self.gpu.device,
-            queue: &self.gpu.queue,
-            quant_step: m.quant_step,
-            model: i as u32,
-        };
-        (m, store)
-    }
-
-    /// Splits the budgets by the models' demand of their last frames (see
-    /// `tessera_stream::BudgetSplit` for the rule and its smoothing).
-    fn rebalance(&mut self, time_s: f64) {
-        let demands: Vec<ModelDemand> = self
-            .models
-            .iter()
-            .map(|m| ModelDemand::of(&m.scheduler, m.stats.wanted_bytes, m.visible))
-            .collect();
-        // Split what the cache can really hold (its two buffers may fill unevenly).
-        let usable = self.cache.usable_bytes().min(self.opts.gpu_budget_bytes);
-        self.split.set_totals(usable, self.opts.ram_budget_bytes);
-        let budgets = self.split.update(time_s, &demands);
-        for (m, &(store, ram)) in self.models.iter_mut().zip(budgets) {
-            m.scheduler.set_budgets(store, ram);
-        }
+    /// The models' views of the shared cache, for the driver.
+    fn stores(&mut self) -> (&mut NativeDriver, CacheStores<'_>) {
+        (
+            &mut self.driver,
+            CacheStores {
+                cache: &mut self.cache,
+                gpu: &self.gpu,
+                models: &self.models,
+            },
+        )
     }
 
     /// The device (e.g. to report the adapter).
@@ -290,12 +284,12 @@ impl Viewer {
     /// and asks for nothing; its demand is 0, so the other models get its memory (all
     /// but its pinned roots) as they need it.
     pub fn set_visible(&mut self, i: usize, visible: bool) {
-        self.models[i].visible = visible;
+        self.driver.set_visible(i, visible);
     }
 
     /// Whether model `i` is shown.
     pub fn is_visible(&self, i: usize) -> bool {
-        self.models[i].visible
+        self.driver.model(i).is_visible()
     }
 
     /// The options.
@@ -305,28 +299,35 @@ impl Viewer {
 
     /// The streaming core driving the (first) model.
     pub fn scheduler(&self) -> &Scheduler {
-        &self.models[0].scheduler
+        &self.driver.model(0).scheduler
     }
 
     /// The streaming core driving model `i`.
     pub fn scheduler_of(&self, i: usize) -> &Scheduler {
-        &self.models[i].scheduler
+        &self.driver.model(i).scheduler
     }
 
     /// Nodes of the (first) model drawn by the last frame.
     pub fn last_draw(&self) -> &[u32] {
-        self.models[0].scheduler.draw()
+        self.driver.model(0).scheduler.draw()
     }
 
     /// Nodes of model `i` drawn by the last frame.
     pub fn last_draw_of(&self, i: usize) -> &[u32] {
-        self.models[i].scheduler.draw()
+        self.driver.model(i).scheduler.draw()
     }
 
     /// Model `i`'s part of the last frame's statistics (its GPU bytes, budget, demand,
     /// cut); [`Viewer::render_with`] returns their combination.
     pub fn model_stats(&self, i: usize) -> &FrameStats {
-        &self.models[i].stats
+        self.driver.model(i).stats()
+    }
+
+    /// Whether streaming has come to rest after the last frame (every shown model:
+    /// nothing pending, growing or blending, nothing missing that could still arrive;
+    /// `tessera_stream::DrivenModel::settled`, the browser's rule too).
+    pub fn settled(&self) -> bool {
+        self.driver.settled()
     }
 
     /// Renders one frame of `camera` into the offscreen target (camera.width x
@@ -354,20 +355,26 @@ impl Viewer {
             .ensure_offscreen(&self.gpu.device, camera.width, camera.height);
         self.renderer
             .ensure_models(&self.gpu.device, self.models.len() as u32);
-        // A paged index read further since the last frame: select over more of it.
-        for i in 0..self.models.len() {
-            let (m, mut store) = self.parts(i);
-            if let Some(ix) = m.model.latest_index() {
-                if ix.nodes().len() > m.scheduler.node_count() {
-                    store.cache.set_nodes(i as u32, &ix);
-                    m.scheduler.set_index(&ix, &mut store);
-                    m.grown = Some(ix);
-                }
-            }
-        }
+        let time_s = self.start.elapsed().as_secs_f64();
         let mut stats = match self.opts.mode {
-            Mode::Progressive => self.progressive_frame(select, camera),
-            Mode::Complete | Mode::FullResolution => self.complete_frames(select, camera)?,
+            Mode::Progressive => {
+                let (driver, mut stores) = self.stores();
+                let stats = driver.frame(select, time_s, &mut stores);
+                self.planes = self.driver.fitted_planes(camera);
+                self.set_uniforms(camera);
+                let draws: Vec<Draws> = self
+                    .driver
+                    .draws()
+                    .map(|(i, nodes, ratios)| (i as u32, nodes, ratios))
+                    .collect();
+                self.submit_cleared(&draws);
+                stats
+            }
+            Mode::Complete | Mode::FullResolution => {
+                let (driver, mut stores) = self.stores();
+                driver.take_grown(time_s, &mut stores);
+                self.complete_frames(select, camera)?
+            }
         };
         self.gpu.wait_idle()?;
         self.last_camera = Some(camera.clone());
@@ -375,67 +382,18 @@ impl Viewer {
         Ok(stats)
     }
 
-    fn progressive_frame(&mut self, select: &Camera, camera: &Camera) -> FrameStats {
-        let time_s = self.start.elapsed().as_secs_f64();
-        let n = self.models.len();
-        let mut order: Vec<usize> = (0..n).collect();
-        if n > 1 {
-            self.rebalance(time_s);
-            // Models over their (new) budget first: the memory they free in the
-            // shared cache is there for the others' uploads in this same frame.
-            order.sort_by_key(|&i| {
-                let s = &self.models[i].scheduler;
-                s.budgets().0 as i128 - s.resident_bytes() as i128
-            });
+    /// One pass drawing `draws` into the cleared offscreen target.
+    fn submit_cleared(&self, draws: &[Draws]) {
+        if let Some(views) = self.renderer.offscreen_views() {
+            submit_pass(&self.gpu, &self.renderer, views, &self.cache, draws, true);
         }
-        for i in order {
-            let (m, mut store) = self.parts(i);
-            m.stats = if m.visible {
-                let stats = m.scheduler.frame(select, time_s, &mut m.pager, &mut store);
-                if stats.index_wants > 0 && !m.growing.swap(true, Ordering::AcqRel) {
-                    // Read more of the index off this thread; the frame never waits.
-                    let (model, growing) = (m.model.clone(), m.growing.clone());
-                    std::thread::spawn(move || {
-                        model.grow_index();
-                        growing.store(false, Ordering::Release);
-                    });
-                }
-                stats
-            } else {
-                m.scheduler.idle_frame(&mut m.pager, &mut store)
-            };
-        }
-        self.planes = fitted_planes(
-            camera,
-            self.models.iter().map(|m| (m.index(), m.scheduler.draw())),
-        );
-        self.set_uniforms(camera);
-        let draws: Vec<Draws> = self
-            .models
-            .iter()
-            .enumerate()
-            .map(|(i, m)| (i as u32, m.scheduler.draw(), m.scheduler.morph_ratios()))
-            .collect();
-        if let Some((color, depth)) = self.renderer.offscreen_views() {
-            submit_pass(
-                &self.gpu,
-                &self.renderer,
-                (color, depth),
-                &self.cache,
-                &draws,
-                true,
-            );
-        }
-        let mut stats = FrameStats::combined(self.models.iter().map(|m| &m.stats));
-        stats.passes = 1;
-        stats
     }
 
     /// Every model's uniforms for `camera` with the frame's planes.
     fn set_uniforms(&self, camera: &Camera) {
         for (i, m) in self.models.iter().enumerate() {
-            let params =
-                FrameParams::with_planes(camera, m.cube_origin(), self.planes, self.opts.shading);
+            let origin = m.model.index().header().cube_origin;
+            let params = FrameParams::with_planes(camera, origin, self.planes, self.opts.shading);
             self.renderer
                 .set_model_frame(&self.gpu.queue, i as u32, &params, m.has_colors);
         }
@@ -449,39 +407,28 @@ impl Viewer {
         // The passes of one frame share planes: fitted to the whole models shown (the
         // cut is not known before it is drawn), tightened by the last frame's cut would
         // risk clipping.
-        let spheres: Vec<(DVec3, f64)> = self
-            .models
-            .iter()
-            .filter(|m| m.visible)
-            .map(|m| {
-                let b = m.model.index().header().bounding_sphere;
-                (DVec3::new(b[0], b[1], b[2]), b[3].max(1e-9))
-            })
-            .collect();
-        self.planes = clip_planes_along(
-            DVec3::from(camera.position),
-            camera.basis().forward,
-            spheres,
-        );
+        self.planes = self.driver.bounding_planes(camera);
         self.set_uniforms(camera);
         let n = self.models.len();
         let (total_gpu, total_ram) = (self.opts.gpu_budget_bytes, self.opts.ram_budget_bytes);
         let mut cleared = false;
         let mut passes = 0;
         for i in 0..n {
-            if !self.models[i].visible {
-                self.models[i].stats = FrameStats::default();
+            if !self.driver.model(i).is_visible() {
+                self.driver.model_mut(i).set_stats(FrameStats::default());
                 continue;
             }
             if n > 1 {
                 // This model gets the whole cache but the others' pinned roots.
                 let mut others = 0;
                 for j in (0..n).filter(|&j| j != i) {
-                    let (m, mut store) = self.parts(j);
-                    m.scheduler.release(&mut store);
+                    let (driver, mut stores) = self.stores();
+                    let m = driver.model_mut(j);
+                    m.scheduler.release(&mut stores.store(j));
                     others += m.scheduler.resident_bytes();
                 }
-                self.models[i]
+                self.driver
+                    .model_mut(i)
                     .scheduler
                     .set_budgets(total_gpu.saturating_sub(others), total_ram);
             }
@@ -490,19 +437,19 @@ impl Viewer {
                 return Err(RenderError::NoFrame);
             };
             let (gpu, renderer) = (&self.gpu, &self.renderer);
-            let m = &mut self.models[i];
+            let m = self.driver.model_mut(i);
             let mut store = GpuStore {
                 cache: &mut self.cache,
                 device: &gpu.device,
                 queue: &gpu.queue,
-                quant_step: m.quant_step,
+                quant_step: self.models[i].quant_step,
                 model: i as u32,
             };
             let stats = m
                 .scheduler
                 .complete_frame(
                     select,
-                    &mut m.pager,
+                    &mut m.source,
                     &mut store,
                     |s, nodes, ratios, clear| {
                         let draws = [(i as u32, nodes, ratios)];
@@ -526,22 +473,13 @@ impl Viewer {
                 })?;
             cleared = true;
             passes += stats.passes;
-            m.stats = stats;
+            m.set_stats(stats);
         }
         if !cleared {
             // Nothing shown: a cleared frame.
-            if let Some((color, depth)) = self.renderer.offscreen_views() {
-                submit_pass(
-                    &self.gpu,
-                    &self.renderer,
-                    (color, depth),
-                    &self.cache,
-                    &[],
-                    true,
-                );
-            }
+            self.submit_cleared(&[]);
         }
-        let mut stats = FrameStats::combined(self.models.iter().map(|m| &m.stats));
+        let mut stats = self.driver.stats();
         stats.passes = passes;
         Ok(stats)
     }
@@ -578,8 +516,8 @@ impl Viewer {
     /// The pagers' counters (bytes read, loads, queue), summed over the models.
     pub fn pager_stats(&self) -> tessera_page::PagerStats {
         let mut out = tessera_page::PagerStats::default();
-        for m in &self.models {
-            let s = m.pager.stats();
+        for m in self.driver.models() {
+            let s = m.source.stats();
             out.queued += s.queued;
             out.in_flight += s.in_flight;
             out.loads += s.loads;
@@ -591,7 +529,7 @@ impl Viewer {
 
     /// Model `i`'s pager counters.
     pub fn pager_stats_of(&self, i: usize) -> tessera_page::PagerStats {
-        self.models[i].pager.stats()
+        self.driver.model(i).source.stats()
     }
 
     /// Near and far planes of the last frame (model units; shared by every model).
@@ -602,35 +540,29 @@ impl Viewer {
     /// The index the (first) model's scheduler selects over (grown from a paged one,
     /// if it was).
     pub fn index(&self) -> &ModelIndex {
-        self.models[0].index()
+        self.driver.model(0).index()
     }
 
     /// The index model `i`'s scheduler selects over.
     pub fn index_of(&self, i: usize) -> &ModelIndex {
-        self.models[i].index()
+        self.driver.model(i).index()
     }
 
     /// Changes the screen-space tolerance (pixels) of every model from the next frame on.
     pub fn set_tolerance_px(&mut self, tolerance_px: f32) {
-        for m in &mut self.models {
-            m.scheduler.set_tolerance_px(tolerance_px);
-        }
-        self.opts.tolerance_px = self.models[0].scheduler.options().tolerance_px;
+        self.driver.set_tolerance_px(tolerance_px);
+        self.opts.tolerance_px = self.driver.model(0).scheduler.options().tolerance_px;
     }
 
     /// Turns the prefetch set on or off from the next frame on.
     pub fn set_prefetch(&mut self, prefetch: bool) {
-        for m in &mut self.models {
-            m.scheduler.set_prefetch(prefetch);
-        }
+        self.driver.set_prefetch(prefetch);
         self.opts.prefetch = prefetch;
     }
 
     /// Turns geomorphing on or off from the next frame on.
     pub fn set_morph(&mut self, enabled: bool) {
-        for m in &mut self.models {
-            m.scheduler.set_morph(enabled);
-        }
+        self.driver.set_morph(enabled);
         self.opts.morph.enabled = enabled;
     }
 
@@ -651,35 +583,6 @@ impl Viewer {
     }
 }
 
-/// Near and far planes fitted to the tight spheres of the nodes drawn, of every model
-/// (each index with its drawn nodes; spheres taken to model coordinates through each
-/// model's cube origin): a close-up gets a near plane just in front of the surface it
-/// looks at, and one depth buffer serves the whole scene.
-fn fitted_planes<'a>(
-    camera: &Camera,
-    models: impl Iterator<Item = (&'a ModelIndex, &'a [u32])>,
-) -> (f64, f64) {
-    let mut spheres = Vec::new();
-    for (index, nodes) in models {
-        let origin = DVec3::from(index.header().cube_origin);
-        spheres.extend(nodes.iter().filter_map(|&n| {
-            let s = index.nodes().get(n as usize)?.tight_sphere;
-            let c = origin + DVec3::new(f64::from(s[0]), f64::from(s[1]), f64::from(s[2]));
-            // f32 spheres: widen by their rounding.
-            Some((
-                c,
-                f64::from(s[3]) * (1.0 + 1e-6) + c.abs().max_element() * 1e-6,
-            ))
-        }));
-    }
-    clip_planes_along(
-        DVec3::from(camera.position),
-        camera.basis().forward,
-        spheres,
-    )
-}
-
-/// The level of every node of `index`, in order (the GPU cache tags vertices with it).
 /// One model's part of a pass: its number, the nodes drawn and their morph ratios.
 type Draws<'a> = (u32, &'a [u32], &'a [f32]);
 

@@ -852,3 +852,32 @@ mod tests {
             .expect("georeferenced coordinates within the bound");
     }
 }
+
+/// Near and far planes around `spheres` (centre, radius; model or any frame shared with
+/// `eye`), measured along the view direction `forward` (unit), as the depth buffer
+/// measures: far just beyond the deepest sphere, near just before the nearest one, but
+/// never below `far * 1e-6`. (Distances alone would clip the near side of whatever is off
+/// axis: a sphere at distance `d` off the axis reaches the view depth
+/// `(c - eye) . forward - r`, less than `d - r`.) Depth is stored reversed (1 at near, 0
+/// at far) in a 32-bit float buffer, whose precision is then nearly uniform in
+/// `log(depth)`: a ratio of 1e6 between far and near still separates surfaces 1e-5 of
+/// their distance apart, so a millimetre detail seen from a few millimetres on a 10 m
+/// statue neither clips nor z-fights. No spheres: `(1e-6, 1)`.
+pub fn clip_planes_along(
+    eye: DVec3,
+    forward: DVec3,
+    spheres: impl IntoIterator<Item = (DVec3, f64)>,
+) -> (f64, f64) {
+    let (mut near, mut far) = (f64::INFINITY, 0.0f64);
+    for (c, r) in spheres {
+        let z = (c - eye).dot(forward);
+        far = far.max(z + r);
+        near = near.min(z - r);
+    }
+    if far <= 0.0 || !far.is_finite() {
+        return (1e-6, 1.0);
+    }
+    let far = far * 1.01;
+    let near = (near * 0.99).max(far * 1e-6);
+    (near, far)
+}

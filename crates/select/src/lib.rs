@@ -36,7 +36,10 @@ pub mod path;
 pub mod residency;
 pub mod select;
 
-pub use camera::{Camera, CameraError, CameraErrorKind, Frustum, Orbit, ViewBasis, CAMERA_FIELDS};
+pub use camera::{
+    clip_planes_along, Camera, CameraError, CameraErrorKind, Frustum, Orbit, ViewBasis,
+    CAMERA_FIELDS,
+};
 pub use edges::{edge_report, EdgeReport};
 #[cfg(feature = "extract")]
 pub use extract::{decode_nodes, extract_nodes, extract_nodes_keeping, write_cut_ply, Extracted};

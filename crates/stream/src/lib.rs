@@ -17,9 +17,14 @@
 //! one RAM budget: a [`BudgetSplit`] turns each model's per-frame demand
 //! ([`FrameStats::wanted_bytes`]) into its budgets ([`Scheduler::set_budgets`]).
 //!
+//! Every front end runs its models' frames through one [`Driver`] (budgets split,
+//! schedulers run, paged indices grown, planes fitted, "settled" decided), so a
+//! per-frame feature is written once for the window, `tessera render` and the browser.
+//!
 //! Both caches the scheduler keeps (decoded patches in RAM, groups in the store) use one
 //! [`Lru`] type under a byte budget, with one frame counter for recency.
 
+mod drive;
 mod groups;
 mod lru;
 mod morph;
@@ -28,11 +33,14 @@ mod source;
 mod split;
 mod store;
 
+pub use drive::{
+    Budgets, DrivenModel, Driver, IndexGrower, OneStore, SceneBudgets, SceneStores, WholeIndex,
+};
 pub use groups::Groups;
 pub use lru::{Lru, PREFERENCE_WINDOW};
 pub use morph::{MorphOptions, MorphSummary, LATE_RATIO};
 pub use scheduler::{
-    decoded_bytes, default_clock, Clock, CompleteError, FrameStats, Mode, Scheduler,
+    decoded_bytes, default_clock, memory_split, Clock, CompleteError, FrameStats, Mode, Scheduler,
     SchedulerOptions, MAX_UPLOAD_ROUNDS, PREFETCH_GROWTH, UNLOAD_GROWTH,
 };
 pub use source::{Answer, PatchSource};

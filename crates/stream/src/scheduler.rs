@@ -128,6 +128,28 @@ impl Default for SchedulerOptions {
     }
 }
 
+/// The one split of a front end's memory figure (`tessera render --memory`, `tessera
+/// view --memory`, the browser's `memoryBytes`) into (store, RAM) budgets: half for
+/// the resident store (GPU vertex, index and texture bytes), a quarter for decoded
+/// patches in RAM; the last quarter is headroom for what no budget counts (patches in
+/// flight between source and store, the index, the window or page).
+pub fn memory_split(memory_bytes: u64) -> (u64, u64) {
+    (memory_bytes / 2, memory_bytes / 4)
+}
+
+impl SchedulerOptions {
+    /// The options with their store and RAM budgets from one memory figure
+    /// ([`memory_split`]).
+    pub fn with_memory(self, memory_bytes: u64) -> SchedulerOptions {
+        let (store, ram) = memory_split(memory_bytes);
+        SchedulerOptions {
+            store_budget_bytes: store,
+            ram_budget_bytes: ram,
+            ..self
+        }
+    }
+}
+
 /// What one frame did (written per frame by `tessera render --stats`).
 #[derive(Clone, Debug, Default, Serialize, PartialEq)]
 pub struct FrameStats {
@@ -723,6 +745,13 @@ impl Scheduler {
     /// Nodes known to fail.
     pub fn failed(&self) -> &FxHashSet<u32> {
         &self.failed
+    }
+
+    /// Nodes of [`Scheduler::failed`] that could not be read this time and are asked
+    /// for again after a backoff (the others failed for good: corrupt bytes, or bytes
+    /// that do not exist).
+    pub fn retrying(&self) -> usize {
+        self.retry.len()
     }
 
     /// Reads the roots now (when the source can block) and uploads them, pinned: the

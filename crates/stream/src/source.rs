@@ -10,7 +10,7 @@
 
 use std::sync::Arc;
 
-use tessera_format::{FormatError, PatchData};
+use tessera_format::{FormatError, ModelIndex, PatchData};
 
 /// One finished request.
 #[derive(Clone, Debug)]
@@ -84,5 +84,11 @@ pub trait PatchSource {
     fn read_now(&mut self, nodes: &[u32]) -> Option<Vec<Answer>> {
         let _ = nodes;
         None
+    }
+    /// Selects over `index` from now on (a paged index read further): a source that
+    /// plans its reads from the node table takes the new one. Default: nothing (a
+    /// reader that grows its own index, as `tessera-page`'s).
+    fn set_index(&mut self, index: &Arc<ModelIndex>) {
+        let _ = index;
     }
 }

@@ -69,6 +69,43 @@ pub trait ResidentStore {
     fn flush(&mut self) {}
 }
 
+/// A borrowed store is a store (a scene of one model hands its store out by
+/// reference: [`crate::OneStore`]). Every method forwards, defaults included.
+impl<R: ResidentStore + ?Sized> ResidentStore for &mut R {
+    fn bytes_for(&self, patch: &PatchData) -> u64 {
+        (**self).bytes_for(patch)
+    }
+    fn estimate_bytes(&self, vertices: u32, triangles: u32) -> u64 {
+        (**self).estimate_bytes(vertices, triangles)
+    }
+    fn estimate_texture_bytes(&self, size: [u16; 2]) -> u64 {
+        (**self).estimate_texture_bytes(size)
+    }
+    fn has_room(&self, patches: &[&PatchData]) -> bool {
+        (**self).has_room(patches)
+    }
+    fn upload(&mut self, node: u32, patch: &PatchData) -> Result<u64, StoreError> {
+        (**self).upload(node, patch)
+    }
+    fn upload_in_group(
+        &mut self,
+        node: u32,
+        patch: &PatchData,
+        siblings: &[&PatchData],
+    ) -> Result<u64, StoreError> {
+        (**self).upload_in_group(node, patch, siblings)
+    }
+    fn evict(&mut self, node: u32) {
+        (**self).evict(node)
+    }
+    fn resident_bytes(&self) -> u64 {
+        (**self).resident_bytes()
+    }
+    fn flush(&mut self) {
+        (**self).flush()
+    }
+}
+
 /// A store that holds nothing but counts: bytes as a GPU store would take them
 /// (24 bytes a vertex, 4 an index). For running the scheduler without a device:
 /// policy tests, the WebAssembly probe, benchmarks of the streaming core.

@@ -12,7 +12,8 @@ use rustc_hash::{FxHashMap, FxHashSet};
 use tessera_format::{Model, PatchData};
 use tessera_select::{edge_report, merge_patches, Camera, Orbit, PatchRef};
 use tessera_stream::{
-    Answer, Mode, PatchSource, ResidentStore, Scheduler, SchedulerOptions, StoreError,
+    Answer, Driver, Mode, OneStore, PatchSource, ResidentStore, SceneBudgets, SceneStores,
+    Scheduler, SchedulerOptions, StoreError, WholeIndex,
 };
 
 // ---------------------------------------------------------------------------------
@@ -1029,4 +1030,155 @@ fn a_late_group_enters_at_its_parents_shape() {
     assert!(late >= 3, "only {late} late groups");
     assert!(blended > 0);
     assert!(s.draw().iter().any(|&n| m.nodes()[n as usize].level >= 4));
+}
+
+// ---------------------------------------------------------------------------------
+// The frame driver every front end runs (`tessera_stream::Driver`).
+
+/// Two models' stores, as a scene's (each model its own fake store).
+struct TwoStores([FakeStore; 2]);
+
+impl SceneStores for TwoStores {
+    type Store<'a>
+        = &'a mut FakeStore
+    where
+        Self: 'a;
+    fn store(&mut self, model: usize) -> &mut FakeStore {
+        &mut self.0[model]
+    }
+}
+
+/// The driver's "settled" is the one rule of every front end: false while patches
+/// are on their way, true once the cut is whole; a patch that failed for good (corrupt)
+/// leaves its parent as the final state and still settles, one that is retried after a
+/// backoff (a network outage) does not.
+#[test]
+fn the_driver_settles_once_nothing_can_still_arrive() {
+    let m = model();
+    let cam = camera(&m, 1.6, 30.0);
+    let run = |fail: Option<Answer>| {
+        let mut src = TestSource::new(m.clone(), 8);
+        if let Some(Answer::Failed { node, .. }) = &fail {
+            src.fail.insert(*node);
+        }
+        let mut d: Driver<TestSource, WholeIndex, SceneBudgets> =
+            Driver::new(SceneBudgets::new(u64::MAX, u64::MAX));
+        d.add(
+            Scheduler::new(m.index(), options(u64::MAX)),
+            src,
+            WholeIndex(Arc::new(m.index().clone())),
+        );
+        let mut store = FakeStore::new(u64::MAX);
+        d.load_roots(&mut OneStore(&mut store));
+        let mut settled_at = None;
+        let mut unsettled = 0;
+        for i in 0..600 {
+            let st = d.frame(&cam, i as f64 / 60.0, &mut OneStore(&mut store));
+            if d.settled() {
+                settled_at.get_or_insert((i, st));
+                break;
+            }
+            unsettled += 1;
+        }
+        (settled_at, unsettled, d)
+    };
+    let (at, unsettled, d) = run(None);
+    let (_, st) = at.expect("the driver never settled on a whole cut");
+    assert!(
+        unsettled > 3,
+        "settled before the patches arrived ({unsettled} frames)"
+    );
+    assert_eq!((st.cache_misses, st.pending_loads), (0, 0), "{st:?}");
+    assert!(d.model(0).scheduler.failed().is_empty());
+
+    // A node of that final cut fails for good: its parent stands in, and the view
+    // settles all the same.
+    let victim = *d.model(0).scheduler.draw().last().unwrap();
+    let (at, _, d) = run(Some(Answer::Failed {
+        node: victim,
+        error: String::new(),
+    }));
+    let (_, st) = at.expect("a corrupt patch kept the view from settling");
+    assert!(d.model(0).scheduler.failed().contains(&victim));
+    assert!(
+        st.cache_misses > 0,
+        "the failed node was not missed: {st:?}"
+    );
+}
+
+/// A scene's models share the budgets by demand through the driver: two models that
+/// want more than the totals each get a part (never more than the totals together);
+/// hidden, one gives its store back down to its pinned roots and the shown one gets
+/// its whole demand.
+#[test]
+fn the_driver_splits_a_scenes_budgets_by_demand() {
+    let m = model();
+    let cam = camera(&m, 1.2, 10.0);
+    let scene = |total: u64| {
+        let mut d: Driver<TestSource, WholeIndex, SceneBudgets> =
+            Driver::new(SceneBudgets::new(total, u64::MAX / 4));
+        for _ in 0..2 {
+            d.add(
+                Scheduler::new(m.index(), options(total)),
+                TestSource::new(m.clone(), 16),
+                WholeIndex(Arc::new(m.index().clone())),
+            );
+        }
+        let mut stores = TwoStores([FakeStore::new(u64::MAX), FakeStore::new(u64::MAX)]);
+        d.load_roots(&mut stores);
+        d.rebalance(0.0, u64::MAX);
+        (d, stores)
+    };
+    let run = |d: &mut Driver<TestSource, WholeIndex, SceneBudgets>,
+               stores: &mut TwoStores,
+               t: &mut f64,
+               total: u64| {
+        for _ in 0..300 {
+            *t += 1.0 / 60.0;
+            d.frame(&cam, *t, stores);
+            let sum: u64 = d.models().iter().map(|m| m.scheduler.budgets().0).sum();
+            assert!(sum <= total, "shares {sum} over the total {total}");
+        }
+    };
+    // What one view wants, with room for both.
+    let mut t = 0.0;
+    let (mut d, mut stores) = scene(1 << 40);
+    run(&mut d, &mut stores, &mut t, 1 << 40);
+    let wanted = d.model(0).stats().wanted_bytes;
+    assert!(wanted > 0);
+
+    // Room for one and a half.
+    let total = wanted * 3 / 2;
+    let (mut d, mut stores) = scene(total);
+    let mut t = 0.0;
+    run(&mut d, &mut stores, &mut t, total);
+    for i in 0..2 {
+        let s = &d.model(i).scheduler;
+        assert!(
+            s.budgets().0 < wanted,
+            "model {i} got its whole demand in a full scene"
+        );
+        assert!(
+            s.budgets().0 > wanted / 4,
+            "model {i} got {} of {wanted}",
+            s.budgets().0
+        );
+    }
+    let hidden_before = d.model(1).scheduler.resident_bytes();
+    d.set_visible(1, false);
+    run(&mut d, &mut stores, &mut t, total);
+    let (a, b) = (&d.model(0).scheduler, &d.model(1).scheduler);
+    assert!(
+        a.budgets().0 >= wanted && a.resident_bytes() >= wanted * 9 / 10,
+        "the shown model got {} of the {wanted} bytes it wants (holds {})",
+        a.budgets().0,
+        a.resident_bytes()
+    );
+    assert_eq!(d.model(1).stats().selected_nodes, 0, "a hidden model drew");
+    // The hidden model keeps only what the shown one leaves (for when it comes back).
+    assert!(
+        b.resident_bytes() < hidden_before && b.resident_bytes() <= total - wanted,
+        "the hidden model holds {} (held {hidden_before}; the shown one wants {wanted} of {total})",
+        b.resident_bytes()
+    );
 }

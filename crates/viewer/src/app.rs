@@ -15,7 +15,7 @@ use winit::keyboard::{Key, KeyCode, NamedKey, PhysicalKey};
 use winit::window::{Window, WindowId};
 
 use tessera_format::PatchReader;
-use tessera_nav::{Aabb, FlyInput, Mode as NavMode, Navigator, UpAxis};
+use tessera_nav::{FlyInput, Mode as NavMode, Navigator, UpAxis};
 use tessera_pick::Ray;
 use tessera_render::{FrameStats, Gpu, Light, Mode, Shading, Viewer, ViewerOptions};
 use tessera_select::{Camera, CameraPath};
@@ -23,8 +23,8 @@ use tessera_select::{Camera, CameraPath};
 use crate::blit::Blit;
 use crate::hud::{self, Action, Hud};
 use crate::pickers::{Picked, Picker, Purpose};
-use crate::scene::{scene_points, ScenePoints};
 use crate::{ViewArgs, ViewError};
+use tessera_nav::{home_navigator, majority_up, scene_points, ScenePoints};
 
 /// Two presses closer than this (and a few pixels) are a double-click.
 const DOUBLE_CLICK: Duration = Duration::from_millis(350);
@@ -253,8 +253,7 @@ impl Running {
             Some(gpu.device.limits().max_texture_dimension_2d as usize),
         );
 
-        let gpu_budget = args.memory_bytes / 2;
-        let ram_budget = args.memory_bytes / 4;
+        let (gpu_budget, ram_budget) = tessera_render::memory_split(args.memory_bytes);
         if args.models.is_empty() {
             return Err(ViewError::Other("no model to show".into()));
         }
@@ -271,16 +270,7 @@ impl Running {
         let scene = ScenePoints::union(&parts);
         // The up axis most models guess from their own extent (ties: the first model's):
         // models side by side make the union wide, not tall.
-        let up = args.up.unwrap_or_else(|| {
-            let guesses: Vec<UpAxis> = parts.iter().map(ScenePoints::guess_up).collect();
-            let count = |a: &UpAxis| guesses.iter().filter(|g| *g == a).count();
-            let best = guesses.iter().map(count).max().unwrap_or(0);
-            guesses
-                .iter()
-                .copied()
-                .find(|g| count(g) == best)
-                .unwrap_or(UpAxis::PosZ)
-        });
+        let up = args.up.unwrap_or_else(|| majority_up(&parts));
         let viewer = Viewer::with_models(
             gpu,
             models.clone(),
@@ -298,21 +288,11 @@ impl Running {
                 ..Default::default()
             },
         )?;
-        let mut nav = Navigator::new(
-            Aabb::new(scene.min, scene.max),
-            up,
-            config.width,
-            config.height,
-        );
-        nav.home_points(&scene.points);
         let step = models
             .iter()
             .map(|m| m.index().grid().step())
             .fold(f64::INFINITY, f64::min);
-        // Closer than that, a copied camera would not validate (its target must lie at
-        // least 1e-9 x its coordinates from the eye: georeferenced scenes).
-        let far_coordinate = scene.min.abs().max(scene.max.abs()).max_element();
-        nav.set_min_distance((step * 4.0).max(far_coordinate * 4e-9));
+        let mut nav = home_navigator(&scene, up, step, config.width, config.height);
         if let Some(cam) = &args.camera {
             nav.set_camera(cam)
                 .map_err(|e| ViewError::Other(format!("--camera: {e}")))?;
@@ -367,14 +347,8 @@ impl Running {
             || self.frame < 3
             || self.nav.needs_update()
             || self.input.fly.any_motion()
-            || self.stats.pending_loads > 0
-            || self.stats.cache_misses > 0
-            || self.stats.index_wants > 0
-            || self.stats.morph_blending > 0
-            || {
-                let p = self.viewer.pager_stats();
-                p.queued + p.in_flight > 0
-            }
+            // Streaming not at rest (the shared driver's rule, as the browser's).
+            || !self.viewer.settled()
             || self.picker.pending() > 0
             || self.message.is_some()
     }

@@ -17,7 +17,6 @@ mod app;
 mod blit;
 mod hud;
 mod pickers;
-mod scene;
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -25,8 +24,6 @@ use std::sync::Arc;
 use tessera_format::PatchReader;
 use tessera_nav::UpAxis;
 use tessera_select::{Camera, CameraPath};
-
-pub use scene::{orbit_path, scene_points, OrbitCameras, ScenePoints};
 
 /// What `tessera view` was asked to show, and how.
 pub struct ViewArgs {

@@ -154,6 +154,18 @@ impl Registration {
     }
 }
 
+/// A view's (or a three.js model's) budgets come from its share of the page's.
+impl tessera_stream::Budgets for Registration {
+    fn share(
+        &mut self,
+        time_s: f64,
+        demands: &[ModelDemand],
+        _usable_store: u64,
+    ) -> Option<Vec<(u64, u64)>> {
+        Some(demands.iter().map(|&d| self.update(time_s, d)).collect())
+    }
+}
+
 impl Drop for Registration {
     fn drop(&mut self) {
         // (`try_with`: a thread's locals may be gone when it ends.)

@@ -8,7 +8,7 @@
 //! indices, the texture's RGBA8) until the page takes them, and records what was
 //! added and evicted; each frame the page builds and disposes its meshes from that and
 //! shows the scheduler's draw list with its morph ratios. Geomorphing as the canvas
-//! viewer: each vertex's morph target and its attributes ([`tessera_render::morph_targets`],
+//! viewer: each vertex's morph target and its attributes ([`tessera_format::morph_targets`],
 //! the GPU cache's own lookup) go with the arrays, and the page's shader blends each
 //! mesh toward them by its node's ratio ([`Stream::ratios`]).
 
@@ -17,14 +17,14 @@ use std::sync::Arc;
 use glam::DVec3;
 use rustc_hash::FxHashMap;
 use serde_json::json;
-use tessera_format::{Grid, PatchData, PatchTexture, ATTR_COLORS, ATTR_TEXTURE};
+use tessera_format::{Grid, ModelIndex, PatchData, PatchTexture, ATTR_COLORS, ATTR_TEXTURE};
 use tessera_nav::Navigator;
 use tessera_select::Camera;
-use tessera_stream::{ResidentStore, StoreError};
+use tessera_stream::{ResidentStore, SceneStores, StoreError};
 use wasm_bindgen::prelude::*;
 
 use crate::viewer::{
-    home_navigator, new_scheduler, now_ms, open_model, points_box, Remote, StreamOptions, Streamed,
+    home_navigator, new_scheduler, now_ms, open_model, Remote, StreamOptions, Streamed,
 };
 
 /// Bytes a vertex takes as the adapter's attributes: position and normal (f32 x 3
@@ -69,7 +69,7 @@ struct PatchArrays {
     target_colors: Vec<f32>,
     target_uvs: Vec<f32>,
     /// Mip levels between the texture's texels and the parent's
-    /// ([`tessera_render::texel_lod`]): drawn at ratio r, sampled no finer than r times it.
+    /// ([`tessera_format::texel_lod`]): drawn at ratio r, sampled no finer than r times it.
     texel_lod: f32,
 }
 
@@ -159,7 +159,7 @@ impl KeptStore {
         // The morph targets: the GPU cache's lookup, as f32 arrays beside the own.
         let (mut targets, mut target_normals, mut target_colors, mut target_uvs) =
             (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-        let found = tessera_render::morph_targets(patch, siblings, textured);
+        let found = tessera_format::morph_targets(patch, siblings, textured);
         if !found.is_empty() {
             let n = patch.positions.len();
             targets.reserve(n * 3);
@@ -242,11 +242,11 @@ impl KeptStore {
             .as_ref()
             .filter(|t| !t.rgba.is_empty() || !t.blocks.is_empty())
             .map_or(0.0, |t| {
-                tessera_render::patch_texel_size(patch, t.width, t.height, self.grid.step())
+                tessera_format::patch_texel_size(patch, t.width, t.height, self.grid.step())
             })
     }
 
-    /// [`tessera_render::texel_lod`] of `node` with texels of `texel_size`: its parent's
+    /// [`tessera_format::texel_lod`] of `node` with texels of `texel_size`: its parent's
     /// when resident, else the one the parent's error allows.
     fn texel_lod(&self, node: u32, texel_size: f32) -> f32 {
         let Some(&(parent, error)) = self.parents.get(node as usize) else {
@@ -256,7 +256,7 @@ impl KeptStore {
             return 0.0;
         }
         let parent_texel = self.held.get(&parent).map_or(0.0, |h| h.1);
-        tessera_render::texel_lod(texel_size, parent_texel, error)
+        tessera_format::texel_lod(texel_size, parent_texel, error)
     }
 }
 
@@ -312,6 +312,36 @@ impl ResidentStore for KeptStore {
     }
 }
 
+/// The kept arrays as the driver's stores (one model): a grown index extends the
+/// parents table the texel detail is read from.
+impl SceneStores for KeptStore {
+    type Store<'a>
+        = &'a mut KeptStore
+    where
+        Self: 'a;
+    fn store(&mut self, _model: usize) -> &mut KeptStore {
+        self
+    }
+    fn index_grown(&mut self, _model: usize, index: &ModelIndex) {
+        self.parents = parents_of(index);
+    }
+}
+
+/// Each node's parent and the parent's error (none for a root: `NO_NODE`, 0).
+fn parents_of(index: &ModelIndex) -> Vec<(u32, f32)> {
+    index
+        .nodes()
+        .iter()
+        .map(|n| {
+            let e = index
+                .nodes()
+                .get(n.parent as usize)
+                .map_or(0.0, |p| p.error);
+            (n.parent, e)
+        })
+        .collect()
+}
+
 /// A remote model streamed for the page's own renderer (the three.js adapter): see the
 /// module docs.
 #[wasm_bindgen]
@@ -345,8 +375,8 @@ impl Stream {
         let (o, _) = StreamOptions::parse(&options)?;
         let opened = open_model(&url, o.prefix_bytes).await?;
         let grid = Grid::of_header(opened.index.header());
-        let nav = home_navigator(&opened.points, grid.step(), 1280, 720);
-        let (points_min, points_max) = points_box(&opened.points);
+        let nav = home_navigator(&opened.scene, grid.step(), 1280, 720);
+        let (points_min, points_max) = (opened.scene.min, opened.scene.max);
         let (http, index, roots, rest) = opened.split();
         let index = Arc::new(index);
         let header = index.header();
@@ -367,17 +397,7 @@ impl Stream {
             textured,
             max_texture_dim: o.max_texture_dim.unwrap_or(4096),
             held: FxHashMap::default(),
-            parents: index
-                .nodes()
-                .iter()
-                .map(|n| {
-                    let e = index
-                        .nodes()
-                        .get(n.parent as usize)
-                        .map_or(0.0, |p| p.error);
-                    (n.parent, e)
-                })
-                .collect(),
+            parents: parents_of(&index),
             bytes: 0,
             added: Vec::new(),
             removed: Vec::new(),
@@ -395,12 +415,12 @@ impl Stream {
 
     /// Decodes fetched patches with `decode` ([`crate::Viewer::set_decoder`]).
     pub fn set_decoder(&mut self, decode: js_sys::Function, workers: u32) {
-        self.m.source.set_decoder(decode, workers);
+        self.m.source_mut().set_decoder(decode, workers);
     }
 
     /// Changes the screen-space tolerance (pixels).
     pub fn set_tolerance_px(&mut self, tolerance_px: f32) {
-        self.m.scheduler.set_tolerance_px(tolerance_px);
+        self.m.scheduler_mut().set_tolerance_px(tolerance_px);
     }
 
     /// Changes the memory budget (bytes; split as at open, and shared with the page's
@@ -439,18 +459,16 @@ impl Stream {
     /// [`Stream::take_added`], [`Stream::draw`]). Returns the statistics as JSON; a
     /// fatal streaming error comes back as an exception.
     pub fn frame(&mut self, camera_json: &str, time_ms: f64) -> Result<String, JsError> {
-        if let Some(m) = self.m.source.fatal.borrow().as_ref() {
+        if let Some(m) = self.m.source().fatal.borrow().as_ref() {
             return Err(err(m));
         }
         let camera = Camera::from_json_str(camera_json).map_err(|e| err(format!("camera: {e}")))?;
-        if let Some(ix) = self.m.take_grown(time_ms) {
-            self.m.set_index(ix, &mut self.store);
-        }
-        self.m.frame(&camera, time_ms, &mut self.store);
+        // The shared driver, as the canvas viewer's and the desktop's.
+        self.m.driver.frame(&camera, time_ms / 1e3, &mut self.store);
         self.m.framed();
         let converged = self.m.settled();
         self.m.converged(converged);
-        let s = &self.m.stats;
+        let s = self.m.stats();
         let mut out = self.m.stats_json(converged);
         let own = json!({
             "resident_nodes": self.store.held.len(),
@@ -532,7 +550,7 @@ impl Stream {
         }
         let level = self
             .m
-            .index
+            .index()
             .nodes()
             .get(node as usize)
             .map_or(0, |n| n.level);
@@ -543,26 +561,26 @@ impl Stream {
     /// The nodes to show this frame (the scheduler's draw list: a crack-free cut of
     /// what is resident).
     pub fn draw(&self) -> Vec<u32> {
-        self.m.scheduler.draw().to_vec()
+        self.m.scheduler().draw().to_vec()
     }
 
     /// The morph ratio of each node of [`Stream::draw`] (same order): 0 draws a patch at
     /// its own shape, 1 at its parent's (blend each vertex toward its target by it). All
     /// zero with morphing off.
     pub fn ratios(&self) -> Vec<f32> {
-        let r = self.m.scheduler.morph_ratios();
-        (0..self.m.scheduler.draw().len())
+        let r = self.m.scheduler().morph_ratios();
+        (0..self.m.scheduler().draw().len())
             .map(|k| r.get(k).copied().unwrap_or(0.0))
             .collect()
     }
 
     /// Turns geomorphing on or off from the next frame on.
     pub fn set_morph(&mut self, enabled: bool) {
-        self.m.scheduler.set_morph(enabled);
+        self.m.scheduler_mut().set_morph(enabled);
     }
 
     /// Stops streaming: requests in flight finish into nothing (also on drop).
     pub fn close(&mut self) {
-        self.m.source.closed.set(true);
+        self.m.source().closed.set(true);
     }
 }

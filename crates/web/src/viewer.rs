@@ -16,12 +16,12 @@ use glam::DVec3;
 use rustc_hash::FxHashMap;
 use serde_json::{json, Value};
 use tessera_format::{Grid, ModelIndex, PatchData, ATTR_COLORS, ATTR_TEXTURE};
-use tessera_nav::{Aabb, Navigator};
-use tessera_render::{clip_planes_along, FrameParams, Gpu, GpuCache, GpuStore, Renderer, Shading};
+use tessera_nav::{Navigator, ScenePoints};
+use tessera_render::{FrameParams, Gpu, GpuCache, GpuStore, Renderer, Shading};
 use tessera_select::Camera;
 use tessera_stream::{
-    Answer, FrameStats, ModelDemand, PatchSource, ResidentStore, Scheduler, SchedulerOptions,
-    StoreError,
+    memory_split, Answer, Driver, FrameStats, IndexGrower, PatchSource, ResidentStore, SceneStores,
+    Scheduler, SchedulerOptions, StoreError,
 };
 use wasm_bindgen::prelude::*;
 use wasm_bindgen_futures::spawn_local;
@@ -168,28 +168,6 @@ impl Remote {
                 workers: workers as usize,
             })
         });
-    }
-
-    /// Whether the fetches and decodes asked for have all settled (nothing pending,
-    /// nothing missing but what does not exist) after a frame with `stats`: the
-    /// streaming half of a converged view.
-    pub fn settled(&self, stats: &FrameStats, scheduler: &Scheduler) -> bool {
-        let fetch = self.fetcher.borrow();
-        // Nodes whose bytes do not exist (a truncated file) stay missing: their parents
-        // are the view's final state, as long as nothing else failed (a network outage
-        // retried with backoff is not converged).
-        // Nor do nodes the budgets leave out (with nothing pending: what they allow is
-        // shown).
-        let gone = fetch.gone();
-        let misses_settled = stats.cache_misses == 0
-            || ((stats.cache_misses <= gone.len() || stats.budget_limited > 0)
-                && scheduler.failed().iter().all(|n| gone.contains(n)));
-        stats.pending_loads == 0
-            && misses_settled
-            && stats.index_wants == 0
-            && stats.morph_blending == 0
-            && fetch.pending() == 0
-            && fetch.undecoded() == 0
     }
 
     /// Sends what the fetcher wants sent; each answer sends more.
@@ -421,12 +399,17 @@ impl PatchSource for Remote {
         self.pump();
     }
     fn pending(&self) -> usize {
-        self.fetcher.borrow().pending()
+        // Fetched patches not decoded yet are not answered yet either.
+        let fetch = self.fetcher.borrow();
+        fetch.pending() + fetch.undecoded()
     }
     fn read_now(&mut self, nodes: &[u32]) -> Option<Vec<Answer>> {
         // Only the roots, once: they were fetched before the viewer was made.
         let roots = std::mem::take(&mut self.roots);
         (!roots.is_empty() && roots.len() == nodes.len()).then_some(roots)
+    }
+    fn set_index(&mut self, index: &Arc<ModelIndex>) {
+        self.fetcher.borrow_mut().set_index(index.clone());
     }
 }
 
@@ -516,6 +499,28 @@ impl ResidentStore for TimedStore<'_> {
     }
 }
 
+/// The canvas's GPU cache (one model) as the driver's stores, uploads timed.
+struct WebStores<'a> {
+    cache: &'a mut GpuCache,
+    gpu: &'a Gpu,
+    quant_step: f64,
+    times: &'a mut UploadTimes,
+}
+
+impl SceneStores for WebStores<'_> {
+    type Store<'b>
+        = TimedStore<'b>
+    where
+        Self: 'b;
+    fn store(&mut self, _model: usize) -> TimedStore<'_> {
+        TimedStore::of(self.cache, self.gpu, self.quant_step, self.times)
+    }
+    fn index_grown(&mut self, _model: usize, index: &ModelIndex) {
+        // Levels and parents of the new nodes, for their vertex tags and texel detail.
+        self.cache.set_nodes(0, index);
+    }
+}
+
 /// What a depth pick (the point drawn under a pixel) is for.
 #[derive(Clone, Copy, Debug)]
 enum Purpose {
@@ -602,60 +607,93 @@ fn parse_camera(json: &str) -> Result<Camera, JsError> {
 }
 
 /// A grown index (or why growing failed), taken by the next frame.
-pub(crate) type Grown = Rc<RefCell<Option<Result<ModelIndex, String>>>>;
+type Grown = Rc<RefCell<Option<Result<ModelIndex, String>>>>;
 
-/// Reads more of `base`, the paged index read so far, off the frame: pages doubled
-/// until another level shows (a page may end inside a level, which stays hidden until it
-/// is whole), as `tessera-http` does; the result lands in `grown`, `growing` is true
-/// meanwhile.
-pub(crate) fn grow_index(
-    source: &Remote,
-    sparse: &Rc<RefCell<SparseBytes>>,
-    base: &Arc<ModelIndex>,
-    grown: &Grown,
-    growing: &Rc<Cell<bool>>,
-) {
-    growing.set(true);
-    let (http, sparse, grown, growing) = (
-        source.http.clone(),
-        sparse.clone(),
-        grown.clone(),
-        growing.clone(),
-    );
-    let base = base.clone();
-    let closed = source.closed.clone();
-    spawn_local(async move {
-        let shown = base.nodes().len();
-        let mut cur = (*base).clone();
-        let r = loop {
-            let pages = (2 * cur.loaded_pages()).max(1);
-            match read_with(&http, &sparse, |s| cur.grown(s, pages)).await {
-                Ok(next) if next.nodes().len() > shown || next.is_complete() => break Ok(next),
-                Ok(next) => cur = next,
-                Err(e) => break Err(e),
-            }
-        };
-        if !closed.get() {
-            *grown.borrow_mut() = Some(r);
-        }
-        growing.set(false);
-    });
-}
-
-/// A model being streamed: what the canvas [`Viewer`] and the three.js adapter's
-/// `Stream` share around their own stores: the scheduler, the patch source, the index
-/// read so far (grown off the frame as the view asks) and the figures of the frames.
-pub(crate) struct Streamed {
-    pub scheduler: Scheduler,
-    pub source: Remote,
-    pub index: Arc<ModelIndex>,
-    pub stats: FrameStats,
+/// The browser's `IndexGrower`: a task on the page's event loop reads more of the
+/// paged index (pages doubled until another level shows: a page may end inside a
+/// level, which stays hidden until it is whole, as `tessera-http` does) through the
+/// ranges fetched so far; the next frame takes it. A failure is reported and retried
+/// 2 s later.
+pub(crate) struct WebGrower {
+    index: Arc<ModelIndex>,
+    http: Rc<Http>,
     sparse: Rc<RefCell<SparseBytes>>,
-    /// A grown index (or why growing failed), taken by the next frame.
+    closed: Rc<Cell<bool>>,
     grown: Grown,
     growing: Rc<Cell<bool>>,
-    /// No growth before this time (after a failure), milliseconds.
-    grow_after_ms: f64,
+    /// No growth before this time (after a failure), seconds.
+    grow_after_s: f64,
+}
+
+impl IndexGrower for WebGrower {
+    fn index(&self) -> &ModelIndex {
+        &self.index
+    }
+
+    fn grow(&mut self, time_s: f64) {
+        if self.growing.get() || time_s < self.grow_after_s {
+            return;
+        }
+        self.growing.set(true);
+        let (http, sparse, grown, growing, closed) = (
+            self.http.clone(),
+            self.sparse.clone(),
+            self.grown.clone(),
+            self.growing.clone(),
+            self.closed.clone(),
+        );
+        let base = self.index.clone();
+        spawn_local(async move {
+            let shown = base.nodes().len();
+            let mut cur = (*base).clone();
+            let r = loop {
+                let pages = (2 * cur.loaded_pages()).max(1);
+                match read_with(&http, &sparse, |s| cur.grown(s, pages)).await {
+                    Ok(next) if next.nodes().len() > shown || next.is_complete() => break Ok(next),
+                    Ok(next) => cur = next,
+                    Err(e) => break Err(e),
+                }
+            };
+            if !closed.get() {
+                *grown.borrow_mut() = Some(r);
+            }
+            growing.set(false);
+        });
+    }
+
+    fn take(&mut self, time_s: f64) -> Option<Arc<ModelIndex>> {
+        let grown = self.grown.borrow_mut().take();
+        match grown {
+            Some(Ok(ix)) if ix.nodes().len() > self.index.nodes().len() => {
+                self.index = Arc::new(ix);
+                Some(self.index.clone())
+            }
+            Some(Err(e)) => {
+                web_sys::console::warn_1(
+                    &format!("tessera: reading more of the index: {e}").into(),
+                );
+                self.grow_after_s = time_s + 2.0;
+                None
+            }
+            _ => None,
+        }
+    }
+
+    fn growing(&self) -> bool {
+        self.growing.get()
+    }
+}
+
+/// The browser's frame driver: one model, its [`Remote`], its index grown by a task,
+/// its budgets a share of the page's.
+pub(crate) type WebDriver = Driver<Remote, WebGrower, crate::budget::Registration>;
+
+/// A model being streamed: what the canvas [`Viewer`] and the three.js adapter's
+/// `Stream` share around their own stores: the shared frame driver
+/// (`tessera_stream::Driver`, as the desktop's) over the model's scheduler, patch
+/// source and index, and the figures of the frames.
+pub(crate) struct Streamed {
+    pub driver: WebDriver,
     opened_ms: f64,
     /// Milliseconds from `open` to the first frame drawn (the roots) and to the first
     /// converged frame.
@@ -665,21 +703,19 @@ pub(crate) struct Streamed {
     frames: u64,
     /// Why part of the model cannot be shown (a truncated file), for the page.
     warning: Option<String>,
-    /// The model's place in the page's budgets (shared by every model on the page).
-    budget: crate::budget::Registration,
-    /// Not shown (a view scrolled away: [`Viewer::set_visible`]): frames are
-    /// [`Streamed::hidden_frame`]s and its demand is 0.
-    pub hidden: bool,
 }
 
 impl Drop for Streamed {
     fn drop(&mut self) {
         // Requests in flight are aborted; no new ones start.
-        self.source.close();
+        self.source().close();
     }
 }
 
 impl Streamed {
+    /// The model opened (`rest`) with its `scheduler` over `source`; its budgets are
+    /// the scheduler's at open, shared with the page's other models from the first
+    /// frame on.
     pub fn new(
         index: Arc<ModelIndex>,
         scheduler: Scheduler,
@@ -687,122 +723,93 @@ impl Streamed {
         rest: OpenedRest,
         opened_ms: f64,
     ) -> Streamed {
-        Streamed {
+        let grower = WebGrower {
             index,
-            source,
-            stats: FrameStats::default(),
+            http: source.http.clone(),
             sparse: rest.sparse,
+            closed: source.closed.clone(),
             grown: Rc::new(RefCell::new(None)),
             growing: Rc::new(Cell::new(false)),
-            grow_after_ms: 0.0,
+            grow_after_s: 0.0,
+        };
+        let mut driver = Driver::new(crate::budget::Registration::new(scheduler.budgets()));
+        driver.add(scheduler, source, grower);
+        Streamed {
+            driver,
             opened_ms,
             first_frame_ms: None,
             converged_ms: None,
             index_bytes: rest.index_bytes,
             frames: 0,
             warning: rest.warning,
-            // The scheduler's budgets at open are the model's own.
-            budget: crate::budget::Registration::new(scheduler.budgets()),
-            scheduler,
-            hidden: false,
         }
     }
 
-    /// Changes the model's own memory budget (split as at open; its share of the
-    /// page's from the next frame on).
+    /// The model's scheduler.
+    pub fn scheduler(&self) -> &Scheduler {
+        &self.driver.model(0).scheduler
+    }
+
+    /// The model's scheduler, mutably.
+    pub fn scheduler_mut(&mut self) -> &mut Scheduler {
+        &mut self.driver.model_mut(0).scheduler
+    }
+
+    /// The model's patch source.
+    pub fn source(&self) -> &Remote {
+        &self.driver.model(0).source
+    }
+
+    /// The model's patch source, mutably.
+    pub fn source_mut(&mut self) -> &mut Remote {
+        &mut self.driver.model_mut(0).source
+    }
+
+    /// The index read so far.
+    pub fn index(&self) -> &ModelIndex {
+        self.driver.model(0).index()
+    }
+
+    /// The index read so far, shared.
+    pub fn index_arc(&self) -> Arc<ModelIndex> {
+        self.driver.model(0).grower.index.clone()
+    }
+
+    /// The last frame's statistics.
+    pub fn stats(&self) -> &FrameStats {
+        self.driver.model(0).stats()
+    }
+
+    /// Whether the model is hidden (a view scrolled away: [`Viewer::set_visible`]):
+    /// its frames draw and ask for nothing and its demand is 0.
+    pub fn hidden(&self) -> bool {
+        !self.driver.model(0).is_visible()
+    }
+
+    /// Hides or shows the model from the next frame on.
+    pub fn set_hidden(&mut self, hidden: bool) {
+        self.driver.set_visible(0, !hidden);
+    }
+
+    /// Changes the model's own memory budget (split as every front end splits one
+    /// memory figure, `tessera_stream::memory_split`; its share of the page's from the
+    /// next frame on).
     pub fn set_memory(&mut self, bytes: u64) {
-        self.budget.set_cap((bytes / 2, bytes / 4));
+        self.driver.budgets().set_cap(memory_split(bytes));
     }
 
-    /// An index grown since the last frame, showing more nodes (the caller readies its
-    /// store for it, then [`Streamed::set_index`]); a failure is reported and retried
-    /// 2 s after `time_ms`.
-    pub fn take_grown(&mut self, time_ms: f64) -> Option<Arc<ModelIndex>> {
-        let grown = self.grown.borrow_mut().take();
-        match grown {
-            Some(Ok(ix)) if ix.nodes().len() > self.index.nodes().len() => Some(Arc::new(ix)),
-            Some(Err(e)) => {
-                web_sys::console::warn_1(
-                    &format!("tessera: reading more of the index: {e}").into(),
-                );
-                self.grow_after_ms = time_ms + 2000.0;
-                None
-            }
-            _ => None,
-        }
-    }
-
-    /// Selects over `ix` from now on (what is resident stays).
-    pub fn set_index(&mut self, ix: Arc<ModelIndex>, store: &mut impl ResidentStore) {
-        self.scheduler.set_index(&ix, store);
-        self.source.fetcher.borrow_mut().set_index(ix.clone());
-        self.index = ix;
-    }
-
-    /// The scheduler's frame of `camera` at `time_ms` over `store`; more of the index
-    /// read when the view wants detail it does not show yet.
-    pub fn frame(&mut self, camera: &Camera, time_ms: f64, store: &mut impl ResidentStore) {
-        // This frame's share of the page's budgets, by the last frame's demand.
-        let (store_budget, ram_budget) = self.budget.update(time_ms / 1e3, self.demand());
-        if (store_budget, ram_budget) != self.scheduler.budgets() {
-            self.scheduler.set_budgets(store_budget, ram_budget);
-        }
-        self.stats = self
-            .scheduler
-            .frame(camera, time_ms / 1e3, &mut self.source, store);
-        if self.stats.index_wants > 0
-            && !self.growing.get()
-            && !self.index.is_complete()
-            && time_ms >= self.grow_after_ms
-        {
-            grow_index(
-                &self.source,
-                &self.sparse,
-                &self.index,
-                &self.grown,
-                &self.growing,
-            );
-        }
-    }
-
-    /// A frame of the model while it is not shown: nothing selected, drawn or asked
-    /// for (requests in flight finish into the RAM cache), and its store evicted down
-    /// to its share of the page's budgets, asked with a demand of 0: what it holds goes
-    /// to the page's other models as they need it (the desktop's rule for a hidden
-    /// model of a scene, `Scheduler::idle_frame`).
-    pub fn hidden_frame(&mut self, time_ms: f64, store: &mut impl ResidentStore) {
-        let (store_budget, ram_budget) = self.budget.update(time_ms / 1e3, self.demand());
-        if (store_budget, ram_budget) != self.scheduler.budgets() {
-            self.scheduler.set_budgets(store_budget, ram_budget);
-        }
-        self.stats = self.scheduler.idle_frame(&mut self.source, store);
-    }
-
-    /// What the model asks of the page's budgets: its last frame's (nothing while
-    /// hidden).
-    fn demand(&self) -> ModelDemand {
-        ModelDemand::of(&self.scheduler, self.stats.wanted_bytes, !self.hidden)
-    }
-
-    /// Whether the page's split has moved this model's budgets since its last frame
-    /// (another model came, went or wants more): an idle view runs a frame to follow.
-    pub fn budget_moved(&mut self, time_ms: f64) -> bool {
-        self.budget.update(time_ms / 1e3, self.demand()) != self.scheduler.budgets()
-    }
-
-    /// Counts a frame shown (after [`Streamed::frame`] and its draw).
+    /// Counts a frame shown (after the driver's frame and its draw).
     pub fn framed(&mut self) {
         self.frames += 1;
-        if self.first_frame_ms.is_none() && self.stats.selected_nodes > 0 {
+        if self.first_frame_ms.is_none() && self.stats().selected_nodes > 0 {
             self.first_frame_ms = Some(now_ms() - self.opened_ms);
         }
     }
 
-    /// Whether streaming has settled: nothing pending or growing, a frame shown.
+    /// Whether streaming has settled (the driver's rule, as the desktop's) after a
+    /// frame shown.
     pub fn settled(&self) -> bool {
-        self.source.settled(&self.stats, &self.scheduler)
-            && !self.growing.get()
-            && self.first_frame_ms.is_some()
+        self.driver.settled() && self.first_frame_ms.is_some()
     }
 
     /// Records whether the view converged this frame (the first time: when).
@@ -815,10 +822,12 @@ impl Streamed {
     /// The statistics both front ends report (see `web/tessera.js`); `idle`: the view
     /// converged.
     pub fn stats_json(&self, idle: bool) -> Value {
-        let fetch = self.source.fetcher.borrow();
+        let source = self.source();
+        let fetch = source.fetcher.borrow();
         let f = fetch.stats();
         let main_decoded = f.decoded - f.worker_decoded;
-        let s = &self.stats;
+        let s = self.stats();
+        let index = self.index();
         json!({
             "idle": idle,
             "frame": self.frames,
@@ -828,23 +837,23 @@ impl Streamed {
             "pending": s.pending_loads,
             "in_flight": fetch.in_flight(),
             "undecoded": fetch.undecoded(),
-            "bytes_received": self.source.http.bytes.get(),
+            "bytes_received": source.http.bytes.get(),
             "index_bytes": self.index_bytes,
-            "requests": self.source.http.requests.get(),
+            "requests": source.http.requests.get(),
             "failed_requests": f.failed_requests,
             // Requests aborted because the view stopped wanting them, and the bytes
             // they asked for.
             "cancelled_requests": f.cancelled_requests,
             "cancelled_bytes": f.cancelled_bytes,
             // Models on the page sharing its memory budget (crate::budget).
-            "page_models": self.budget.page_models(),
+            "page_models": self.driver.budgets().page_models(),
             // Groups the view needs that its budgets leave out this frame.
             "budget_limited": s.budget_limited,
             // The store bytes the view's whole cut needs (its demand on the budgets).
             "wanted_bytes": s.wanted_bytes,
             "failed_patches": s.failed_patches,
-            "index_nodes": self.index.nodes().len(),
-            "model_nodes": self.index.header().node_count,
+            "index_nodes": index.nodes().len(),
+            "model_nodes": index.header().node_count,
             "ram_bytes": s.ram_resident_bytes,
             "selection_ms": s.selection_ms,
             // Patches decoded: all, and by the decode workers (their time is off the
@@ -857,8 +866,8 @@ impl Streamed {
             // Main-thread time taking the workers' replies in (copies).
             "reply_ms_mean": if f.worker_decoded > 0 { f.reply_ms / f.worker_decoded as f64 } else { 0.0 },
             "reply_ms_max": f.reply_max_ms,
-            "decode_workers": self.source.decoder.as_ref().map_or(0, |d| d.workers),
-            "workers_failed": self.source.workers_failed.get(),
+            "decode_workers": source.decoder.as_ref().map_or(0, |d| d.workers),
+            "workers_failed": source.workers_failed.get(),
             "decode_ms_mean": if main_decoded > 0 { f.decode_ms / main_decoded as f64 } else { 0.0 },
             "decode_ms_max": f.decode_max_ms,
             "decode_ms_total": f.decode_ms,
@@ -878,8 +887,8 @@ pub(crate) struct Opened {
     /// The roots, fetched and decoded (answered by [`Remote`]'s `read_now`).
     pub roots: Vec<Answer>,
     /// The roots' vertices in model coordinates (or the bounding sphere's box), which
-    /// frame the home view.
-    pub points: Vec<DVec3>,
+    /// frame the home view, and their box.
+    pub scene: ScenePoints,
     /// Why part of the model cannot be shown (a truncated file), for the page.
     pub warning: Option<String>,
     /// Bytes fetched to read the header and the top of the index.
@@ -969,18 +978,14 @@ pub(crate) async fn open_model(url: &str, prefix_bytes: u64) -> Result<Opened, J
         }
         roots.push(Answer::from_result(n as u32, p));
     }
-    if points.is_empty() {
-        let b = index.header().bounding_sphere;
-        let c = DVec3::new(b[0], b[1], b[2]);
-        points = vec![c - DVec3::splat(b[3]), c + DVec3::splat(b[3])];
-    }
+    let scene = ScenePoints::from_points(&points, HOME_POINTS, index.header().bounding_sphere);
 
     Ok(Opened {
         http,
         sparse,
         index,
         roots,
-        points,
+        scene,
         warning,
         index_bytes,
     })
@@ -1023,39 +1028,23 @@ impl StreamOptions {
     }
 }
 
-/// The scheduler of an opened model with the options `o`: `memory` bytes, half for the
-/// store, a quarter for decoded patches in RAM (as `tessera render --memory`).
+/// The scheduler of an opened model with the options `o`: `memory` bytes split as
+/// every front end splits them (`tessera_stream::memory_split`).
 pub(crate) fn new_scheduler(index: &ModelIndex, o: &StreamOptions) -> Scheduler {
     let mut options = SchedulerOptions {
         tolerance_px: o.tolerance_px,
-        store_budget_bytes: o.memory / 2,
-        ram_budget_bytes: o.memory / 4,
         clock: now_ms,
         ..SchedulerOptions::default()
-    };
+    }
+    .with_memory(o.memory);
     options.morph.enabled &= o.morph;
     Scheduler::new(index, options)
 }
 
-/// The box of `points` (min, max).
-pub(crate) fn points_box(points: &[DVec3]) -> (DVec3, DVec3) {
-    points.iter().fold(
-        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
-        |(lo, hi), &p| (lo.min(p), hi.max(p)),
-    )
-}
-
-/// The desktop's navigation over the roots' extent: the home view framed by `points`,
-/// up guessed from their box.
-pub(crate) fn home_navigator(points: &[DVec3], quant_step: f64, w: u32, h: u32) -> Navigator {
-    let (min, max) = points_box(points);
-    let up = tessera_nav::guess_up(min.to_array(), max.to_array());
-    let mut nav = Navigator::new(Aabb::new(min, max), up, w, h);
-    let stride = points.len().div_ceil(HOME_POINTS).max(1);
-    let home: Vec<DVec3> = points.iter().step_by(stride).copied().collect();
-    nav.home_points(&home);
-    nav.set_min_distance(quant_step * 4.0);
-    nav
+/// The navigation of every front end over the roots' extent (`tessera_nav::home_navigator`):
+/// the home view framed by them, up guessed from their box.
+pub(crate) fn home_navigator(scene: &ScenePoints, quant_step: f64, w: u32, h: u32) -> Navigator {
+    tessera_nav::home_navigator(scene, scene.guess_up(), quant_step, w, h)
 }
 
 #[wasm_bindgen]
@@ -1139,7 +1128,7 @@ impl Viewer {
 
         let opened = open_model(&url, prefix_bytes).await?;
         let grid = Grid::of_header(opened.index.header());
-        let mut nav = home_navigator(&opened.points, grid.step(), w, h);
+        let mut nav = home_navigator(&opened.scene, grid.step(), w, h);
         let (http, index, roots, opened_rest) = opened.split();
         if let Some(cam) = &camera {
             nav.set_camera(cam)
@@ -1152,7 +1141,7 @@ impl Viewer {
         renderer.set_base_vertex(gpu.base_vertex());
         let has_colors = index.header().attributes & ATTR_COLORS != 0;
         renderer.has_colors = has_colors;
-        let mut cache = GpuCache::new(&gpu.device, memory / 2);
+        let mut cache = GpuCache::new(&gpu.device, memory_split(memory).0);
         // Levels for the vertex tags; parents and their errors for the texel detail a
         // textured patch morphs from (as the desktop).
         cache.set_nodes(0, &index);
@@ -1211,49 +1200,39 @@ impl Viewer {
     /// Returns the statistics as JSON (see `web/tessera.js`); a fatal streaming error
     /// comes back as an exception.
     pub fn frame(&mut self, time_ms: f64) -> Result<String, JsError> {
-        if let Some(m) = self.m.source.fatal.borrow().as_ref() {
+        if let Some(m) = self.m.source().fatal.borrow().as_ref() {
             return Err(err(m));
         }
         let dt = self.last_ms.map_or(0.0, |t| ((time_ms - t) / 1e3).max(0.0));
         self.last_ms = Some(time_ms);
+        let time_s = time_ms / 1e3;
         // Depth picks answered since the last frame act now (zoom, recentre, pinch),
         // before the navigation moves; the next one reads the frame last drawn.
         self.poll_picks();
         let moving = self.nav.needs_update() || self.drag.is_some();
         self.nav.update(dt);
+        let mut stores = WebStores {
+            cache: &mut self.cache,
+            gpu: &self.gpu,
+            quant_step: self.quant_step,
+            times: &mut self.uploads,
+        };
         // A paged index read further: select over more of it.
-        if let Some(ix) = self.m.take_grown(time_ms) {
-            self.cache.set_nodes(0, &ix);
-            let mut store = TimedStore::of(
-                &mut self.cache,
-                &self.gpu,
-                self.quant_step,
-                &mut self.uploads,
-            );
-            self.m.set_index(ix, &mut store);
+        if self.m.driver.take_grown(time_s, &mut stores) {
             self.dirty = true;
         }
-        // (An idle view follows its share of the page's budgets too.)
-        let idle = self.converged && !moving && !self.dirty && !self.m.budget_moved(time_ms);
+        // (An idle view follows its share of the page's budgets too; a hidden one runs
+        // the driver's idle frame: no selection, draw or request, its memory given back.)
+        let idle = self.converged
+            && !moving
+            && !self.dirty
+            && !self.m.driver.budgets_moved(time_s, u64::MAX);
         let mut drew = false;
-        if self.m.hidden {
-            // Scrolled away: no selection, draw or request; the memory given back.
-            let mut store = TimedStore::of(
-                &mut self.cache,
-                &self.gpu,
-                self.quant_step,
-                &mut self.uploads,
-            );
-            self.m.hidden_frame(time_ms, &mut store);
+        if self.m.hidden() {
+            self.m.driver.frame(&self.nav.camera(), time_s, &mut stores);
         } else if !idle {
             let camera = self.nav.camera();
-            let mut store = TimedStore::of(
-                &mut self.cache,
-                &self.gpu,
-                self.quant_step,
-                &mut self.uploads,
-            );
-            self.m.frame(&camera, time_ms, &mut store);
+            self.m.driver.frame(&camera, time_s, &mut stores);
             self.dirty = false;
             // A frame the canvas could not take (resized, lost) is drawn again next time.
             drew = self.draw(&camera);
@@ -1267,18 +1246,18 @@ impl Viewer {
             && self.pick_in_flight.is_none();
         self.converged = converged;
         self.m.converged(converged);
-        let s = &self.m.stats;
+        let s = self.m.stats();
         let u = self.uploads;
         // The drawn patch with the largest texture: its size in the file and as
         // uploaded (from the first mip that fits the device's largest texture).
         let largest_texture = self
             .m
-            .scheduler
+            .scheduler()
             .draw()
             .iter()
             .filter_map(|&n| {
                 let t = &self.cache.slot(n)?.texture.as_ref()?.texture;
-                let stored = self.m.index.nodes().get(n as usize)?.texture_size;
+                let stored = self.m.index().nodes().get(n as usize)?.texture_size;
                 Some((n, stored, [t.width(), t.height()]))
             })
             .max_by_key(|&(n, stored, _)| (stored[0].max(stored[1]), std::cmp::Reverse(n)))
@@ -1290,7 +1269,7 @@ impl Viewer {
             // Whether this call drew the canvas (a screenshot reads it right after).
             "drew": drew,
             // Not shown (scrolled away): nothing drawn or fetched, demand 0.
-            "hidden": self.m.hidden,
+            "hidden": self.m.hidden(),
             // GPU bytes of the resident patches, their textures (mips included) in
             // them, and the textures' part.
             "gpu_bytes": s.gpu_resident_bytes,
@@ -1335,26 +1314,13 @@ impl Viewer {
             _ => return false,
         };
         let view = frame.texture.create_view(&Default::default());
-        // Near and far fitted to the drawn nodes' tight spheres, as the desktop viewer.
-        let origin = DVec3::from(self.m.index.header().cube_origin);
-        let nodes = self.m.index.nodes();
-        let spheres = self.m.scheduler.draw().iter().filter_map(|&n| {
-            let s = nodes.get(n as usize)?.tight_sphere;
-            let c = origin + DVec3::new(f64::from(s[0]), f64::from(s[1]), f64::from(s[2]));
-            Some((
-                c,
-                f64::from(s[3]) * (1.0 + 1e-6) + c.abs().max_element() * 1e-6,
-            ))
-        });
-        let planes = clip_planes_along(
-            DVec3::from(camera.position),
-            camera.basis().forward,
-            spheres,
-        );
+        // Near and far fitted to the drawn nodes' tight spheres (the driver's, as the
+        // desktop's).
+        let planes = self.m.driver.fitted_planes(camera);
         self.drawn = Some((camera.clone(), planes));
         let params = FrameParams::with_planes(
             camera,
-            self.m.index.header().cube_origin,
+            self.m.index().header().cube_origin,
             planes,
             Shading::default(),
         );
@@ -1367,10 +1333,10 @@ impl Viewer {
                 label: Some("tessera web frame"),
             });
         let cache = &self.cache;
-        let ratios = self.m.scheduler.morph_ratios();
+        let ratios = self.m.scheduler().morph_ratios();
         let slots = self
             .m
-            .scheduler
+            .scheduler()
             .draw()
             .iter()
             .enumerate()
@@ -1392,7 +1358,7 @@ impl Viewer {
     /// many run at once. Without a decoder, or once it fails, patches are decoded on
     /// this thread between frames.
     pub fn set_decoder(&mut self, decode: js_sys::Function, workers: u32) {
-        self.m.source.set_decoder(decode, workers);
+        self.m.source_mut().set_decoder(decode, workers);
     }
 
     /// The canvas was resized to `width` x `height` pixels.
@@ -1441,7 +1407,7 @@ impl Viewer {
 
     /// Changes the screen-space tolerance (pixels).
     pub fn set_tolerance_px(&mut self, tolerance_px: f32) {
-        self.m.scheduler.set_tolerance_px(tolerance_px);
+        self.m.scheduler_mut().set_tolerance_px(tolerance_px);
         self.dirty = true;
     }
 
@@ -1450,8 +1416,8 @@ impl Viewer {
     /// so the views on screen get the memory it held as they need it (it keeps what
     /// they leave it); shown again, it selects and draws at its next frame.
     pub fn set_visible(&mut self, visible: bool) {
-        if self.m.hidden == visible {
-            self.m.hidden = !visible;
+        if self.m.hidden() == visible {
+            self.m.set_hidden(!visible);
             self.dirty = true;
         }
     }
@@ -1555,9 +1521,9 @@ impl Viewer {
     pub fn pick(&self, x: f64, y: f64) -> js_sys::Promise {
         let camera = self.nav.camera();
         let ray = tessera_pick::Ray::through_pixel(&camera, x.floor() + 0.5, y.floor() + 0.5);
-        let reader = crate::plan::PickReader::new(self.m.index.clone());
-        let http = self.m.source.http.clone();
-        let closed = self.m.source.closed.clone();
+        let reader = crate::plan::PickReader::new(self.m.index_arc());
+        let http = self.m.source().http.clone();
+        let closed = self.m.source().closed.clone();
         wasm_bindgen_futures::future_to_promise(async move {
             let t0 = now_ms();
             let fail = |m: String| JsValue::from(js_sys::Error::new(&format!("pick: {m}")));

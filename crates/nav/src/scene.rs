@@ -1,7 +1,9 @@
-//! What the viewer knows of a model's shape before any detail arrives: the vertices of
+//! What a front end knows of a model's shape before any detail arrives: the vertices of
 //! its roots (the coarsest level, a few thousand triangles of the whole model), read
 //! once at start. They frame the home view by the model's extent as seen from the
-//! camera, and the tallest axis of their box is the guessed up axis.
+//! camera ([`home_navigator`]: the window, the browser and the three.js adapter alike)
+//! and `tessera render --orbit`'s cameras ([`orbit_path`]), and the tallest axis of
+//! their box is the guessed up axis.
 
 use glam::DVec3;
 use tessera_format::{Grid, PatchReader, NO_NODE};
@@ -15,6 +17,26 @@ pub struct ScenePoints {
 }
 
 impl ScenePoints {
+    /// Points kept from `all` (at most `max_points`, evenly strided) and the box around
+    /// all of them; none at all: the box of `fallback` (a bounding sphere: centre,
+    /// radius) stands in.
+    pub fn from_points(all: &[DVec3], max_points: usize, fallback: [f64; 4]) -> ScenePoints {
+        let all: Vec<DVec3> = if all.is_empty() {
+            let c = DVec3::new(fallback[0], fallback[1], fallback[2]);
+            let r = DVec3::splat(fallback[3]);
+            vec![c - r, c + r]
+        } else {
+            all.to_vec()
+        };
+        let stride = all.len().div_ceil(max_points.max(2));
+        let points: Vec<DVec3> = all.iter().step_by(stride.max(1)).copied().collect();
+        let (min, max) = all.iter().fold(
+            (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+            |(lo, hi), &p| (lo.min(p), hi.max(p)),
+        );
+        ScenePoints { points, min, max }
+    }
+
     /// The scene of several models: their root vertices together (models share model
     /// coordinates) and the box around all of them.
     pub fn union(parts: &[ScenePoints]) -> ScenePoints {
@@ -29,8 +51,8 @@ impl ScenePoints {
     }
 
     /// The up axis guessed from the box: the axis it is tallest along.
-    pub fn guess_up(&self) -> tessera_nav::UpAxis {
-        tessera_nav::guess_up(self.min.to_array(), self.max.to_array())
+    pub fn guess_up(&self) -> crate::UpAxis {
+        crate::guess_up(self.min.to_array(), self.max.to_array())
     }
 }
 
@@ -51,19 +73,39 @@ pub fn scene_points(model: &dyn PatchReader, max_points: usize) -> ScenePoints {
     for p in model.decode_patches(&roots).into_iter().flatten() {
         all.extend(p.positions.iter().map(|&q| DVec3::from(grid.position(q))));
     }
-    if all.is_empty() {
-        let b = index.header().bounding_sphere;
-        let c = DVec3::new(b[0], b[1], b[2]);
-        let r = DVec3::splat(b[3]);
-        all = vec![c - r, c + r];
-    }
-    let stride = all.len().div_ceil(max_points.max(2));
-    let points: Vec<DVec3> = all.iter().step_by(stride.max(1)).copied().collect();
-    let (min, max) = all.iter().fold(
-        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
-        |(lo, hi), &p| (lo.min(p), hi.max(p)),
-    );
-    ScenePoints { points, min, max }
+    ScenePoints::from_points(&all, max_points, index.header().bounding_sphere)
+}
+
+/// The up axis most of `parts` guess from their own extent (ties: the first part's;
+/// none: +z): models side by side make their union wide, not tall.
+pub fn majority_up(parts: &[ScenePoints]) -> crate::UpAxis {
+    let guesses: Vec<crate::UpAxis> = parts.iter().map(ScenePoints::guess_up).collect();
+    let count = |a: &crate::UpAxis| guesses.iter().filter(|g| *g == a).count();
+    let best = guesses.iter().map(count).max().unwrap_or(0);
+    guesses
+        .iter()
+        .copied()
+        .find(|g| count(g) == best)
+        .unwrap_or(crate::UpAxis::PosZ)
+}
+
+/// The navigation every front end starts with: turntable about `up` over the scene's
+/// box, the home view framed by its points, and a closest approach of 4 quantisation
+/// steps (`quant_step`, the finest of the scene's models), never closer than a copied
+/// camera could be written (its target must lie at least 1e-9 x its coordinates from
+/// the eye: georeferenced scenes).
+pub fn home_navigator(
+    scene: &ScenePoints,
+    up: crate::UpAxis,
+    quant_step: f64,
+    width: u32,
+    height: u32,
+) -> crate::Navigator {
+    let mut nav = crate::Navigator::new(crate::Aabb::new(scene.min, scene.max), up, width, height);
+    nav.home_points(&scene.points);
+    let far_coordinate = scene.min.abs().max(scene.max.abs()).max_element();
+    nav.set_min_distance((quant_step * 4.0).max(far_coordinate * 4e-9));
+    nav
 }
 
 /// An orbit of `frames` cameras around `up` that frames the model by its extent as
@@ -116,11 +158,11 @@ impl OrbitCameras {
 /// The orbit of `frames` frames around `up` (see [`OrbitCameras`]).
 pub fn orbit_path(
     scene: &ScenePoints,
-    up: tessera_nav::UpAxis,
+    up: crate::UpAxis,
     frames: u32,
     width: u32,
     height: u32,
-) -> Result<OrbitCameras, tessera_nav::FrameError> {
+) -> Result<OrbitCameras, crate::FrameError> {
     let u = up.vector();
     let basis = u.any_orthonormal_pair();
     // 64 directions around the circle give the pivot and the distance, whatever
@@ -131,7 +173,7 @@ pub fn orbit_path(
     for i in 0..PROBES {
         let az = std::f64::consts::TAU * f64::from(i) / f64::from(PROBES);
         let d = OrbitCameras::view_dir(u, basis, az);
-        let c = tessera_nav::frame(&scene.points, d, u, ORBIT_FOV_DEG, width, height, 0.08)?;
+        let c = crate::frame(&scene.points, d, u, ORBIT_FOV_DEG, width, height, 0.08)?;
         let t = DVec3::from(c.target);
         pivot += t;
         distance = distance.max((DVec3::from(c.position) - t).length());
