@@ -2,16 +2,29 @@
 //!
 //! Requests are resolved by looking a decoded name up in this set, never by joining a
 //! request path onto the file system. The set is built at startup from the inputs
-//! (model files and directories) and rebuilt from them by [`Models::rescan`] (on every
-//! catalogue request and periodically), so new builds in a served directory appear and
-//! removed ones disappear.
+//! (model files and directories) and rebuilt from them by [`Models::rescan`]
+//! (periodically, and by [`Models::refresh`] when a served directory or file changed),
+//! so new builds in a served directory appear and removed ones disappear.
+//!
+//! Nothing here may block on what lies in a directory: a FIFO named `x.tsr` blocks a
+//! plain `open` until a writer appears (issue 29), so every entry is classified by its
+//! directory entry type and `stat` first, and opened with `O_NONBLOCK` and checked
+//! again on the descriptor ([`open_regular`]). Every skipped name is warned about once,
+//! not on every scan.
+//!
+//! The catalogue is cached: a request stats the served directories and files (a few
+//! system calls) and rescans only when one of them changed; the JSON body is built once
+//! per change of the set ([`Models::catalogue_json`]). 1,000 models: a rescan costs
+//! tens of milliseconds, a cached catalogue request well under one.
 
 use std::collections::{BTreeMap, HashSet};
 use std::fs::File;
 use std::hash::{Hash, Hasher};
 use std::io;
+use std::os::unix::ffi::OsStrExt;
 use std::os::unix::fs::{FileExt, MetadataExt, OpenOptionsExt};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Mutex, RwLock};
 use std::time::{Duration, SystemTime};
 
@@ -93,6 +106,42 @@ pub struct Models {
     set: RwLock<BTreeMap<String, Entry>>,
     /// Warnings already logged (so a rescan every few seconds does not repeat them).
     warned: Mutex<HashSet<String>>,
+    /// What the inputs looked like when the current set was scanned (taken before the
+    /// scan): a refresh rescans only when this changed. Held while a rescan runs, so
+    /// concurrent requests wait for one rescan instead of running their own.
+    stamp: Mutex<Vec<Option<Stamp>>>,
+    /// Bumped whenever the set (or an entry's info) changes.
+    generation: AtomicU64,
+    /// The catalogue's JSON body and the generation it was built for.
+    catalogue: Mutex<Option<(u64, bytes::Bytes)>>,
+}
+
+/// What a served directory or file looked like: a directory's mtime changes when an
+/// entry is created, removed or renamed into it (a new build lands by rename).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Stamp {
+    dev: u64,
+    ino: u64,
+    size: u64,
+    mtime_s: i64,
+    mtime_ns: i64,
+    ctime_s: i64,
+    ctime_ns: i64,
+}
+
+impl Stamp {
+    fn of(p: &Path) -> Option<Stamp> {
+        let m = std::fs::metadata(p).ok()?;
+        Some(Stamp {
+            dev: m.dev(),
+            ino: m.ino(),
+            size: m.size(),
+            mtime_s: m.mtime(),
+            mtime_ns: m.mtime_nsec(),
+            ctime_s: m.ctime(),
+            ctime_ns: m.ctime_nsec(),
+        })
+    }
 }
 
 /// Why the inputs give no served set at all.
@@ -155,7 +204,11 @@ impl Models {
             dirs,
             set: RwLock::new(BTreeMap::new()),
             warned: Mutex::new(HashSet::new()),
+            stamp: Mutex::new(Vec::new()),
+            generation: AtomicU64::new(0),
+            catalogue: Mutex::new(None),
         };
+        *models.stamp.lock().unwrap_or_else(|e| e.into_inner()) = models.stamps();
         let scan = models.scan(&BTreeMap::new());
         if let Some((name, first, second)) = scan.clashes.into_iter().next() {
             return Err(StartError::NameClash {
@@ -176,9 +229,38 @@ impl Models {
         Ok(models)
     }
 
+    /// The stamps of the inputs now: directories first, then files.
+    fn stamps(&self) -> Vec<Option<Stamp>> {
+        self.dirs
+            .iter()
+            .chain(&self.files)
+            .map(|p| Stamp::of(p))
+            .collect()
+    }
+
+    /// Rescans if a served directory or file changed since the last scan (blocking: a
+    /// `stat` per input, and the rescan when needed). A change within the same clock
+    /// tick as the scan before it is caught by the periodic [`Models::rescan`].
+    pub fn refresh(&self) {
+        let mut last = self.stamp.lock().unwrap_or_else(|e| e.into_inner());
+        let now = self.stamps();
+        if *last == now {
+            return;
+        }
+        *last = now;
+        self.rescan_now();
+    }
+
     /// Rebuilds the served set from the inputs (blocking: it lists directories and reads
     /// headers of new or changed files).
     pub fn rescan(&self) {
+        let mut last = self.stamp.lock().unwrap_or_else(|e| e.into_inner());
+        *last = self.stamps();
+        self.rescan_now();
+    }
+
+    /// The rescan itself (the caller holds `stamp`).
+    fn rescan_now(&self) {
         let old = self.snapshot();
         let scan = self.scan(&old);
         for s in &scan.skipped {
@@ -191,7 +273,30 @@ impl Models {
                 first.display()
             ));
         }
+        let changed = !same_set(&old, &scan.set);
         *self.set.write().unwrap_or_else(|e| e.into_inner()) = scan.set;
+        if changed {
+            self.generation.fetch_add(1, Ordering::SeqCst);
+        }
+    }
+
+    /// The catalogue's JSON body for the current set, built once per change; `build`
+    /// makes it from a snapshot.
+    pub fn catalogue_json(
+        &self,
+        build: impl FnOnce(&BTreeMap<String, Entry>) -> Vec<u8>,
+    ) -> bytes::Bytes {
+        let mut c = self.catalogue.lock().unwrap_or_else(|e| e.into_inner());
+        // Read the generation before the set: a change after it rebuilds next time.
+        let generation = self.generation.load(Ordering::SeqCst);
+        if let Some((g, body)) = c.as_ref() {
+            if *g == generation {
+                return body.clone();
+            }
+        }
+        let body = bytes::Bytes::from(build(&self.snapshot()));
+        *c = Some((generation, body.clone()));
+        body
     }
 
     /// The current set.
@@ -217,6 +322,7 @@ impl Models {
             .get_mut(name)
         {
             e.info = info;
+            self.generation.fetch_add(1, Ordering::SeqCst);
         }
     }
 
@@ -264,13 +370,35 @@ impl Models {
             let mut names: Vec<(String, PathBuf)> = Vec::new();
             for e in entries.flatten() {
                 let path = e.path();
-                let Some(name) = e.file_name().to_str().map(str::to_string) else {
-                    continue;
-                };
-                if !name.ends_with(".tsr") || !servable_name(&name) {
+                let raw = e.file_name();
+                if !raw.as_bytes().ends_with(b".tsr") {
                     continue;
                 }
-                names.push((name, path));
+                let Some(name) = raw.to_str().filter(|n| servable_name(n)) else {
+                    // Quoted: a name may hold a newline or other control characters.
+                    scan.skipped.push(format!(
+                        "{:?}: skipped: names with control characters, `\\`, a leading `.` \
+                         or invalid UTF-8 are not served",
+                        path
+                    ));
+                    continue;
+                };
+                // The entry's own type (lstat, no open): a FIFO, socket, device or
+                // directory is skipped before anything could block on it; a symbolic
+                // link is resolved and checked below.
+                match e.file_type() {
+                    Ok(t) if t.is_file() || t.is_symlink() => {}
+                    Ok(_) => {
+                        scan.skipped
+                            .push(format!("{path:?}: skipped: not a regular file"));
+                        continue;
+                    }
+                    Err(err) => {
+                        scan.skipped.push(format!("{path:?}: skipped: {err}"));
+                        continue;
+                    }
+                }
+                names.push((name.to_string(), path));
             }
             names.sort();
             for (name, path) in names {
@@ -345,16 +473,45 @@ impl Models {
 /// Opens a served file for reading: never through a symbolic link for directory
 /// entries (their path is canonical), and only regular files.
 pub fn open_model(path: &Path, from_dir: bool) -> io::Result<File> {
+    open_regular(path, from_dir)
+}
+
+/// Opens `path` for reading if it is a regular file, without ever blocking on what it
+/// is: a `stat` first (a FIFO, device or socket is refused before any `open`), then an
+/// `open` with `O_NONBLOCK` (a FIFO swapped in between opens at once instead of
+/// waiting for a writer) and the descriptor checked again. `no_follow` adds
+/// `O_NOFOLLOW` (for canonical paths: a symbolic link swapped in is refused). Reads of
+/// a regular file ignore `O_NONBLOCK`.
+pub fn open_regular(path: &Path, no_follow: bool) -> io::Result<File> {
+    let not_regular = || io::Error::other("not a regular file");
+    let meta = if no_follow {
+        std::fs::symlink_metadata(path)?
+    } else {
+        std::fs::metadata(path)?
+    };
+    if !meta.is_file() {
+        return Err(not_regular());
+    }
     let mut o = std::fs::OpenOptions::new();
     o.read(true);
-    if from_dir {
-        o.custom_flags(libc::O_NOFOLLOW);
+    let mut flags = libc::O_NONBLOCK;
+    if no_follow {
+        flags |= libc::O_NOFOLLOW;
     }
+    o.custom_flags(flags);
     let f = o.open(path)?;
     if !f.metadata()?.is_file() {
-        return Err(io::Error::other("not a regular file"));
+        return Err(not_regular());
     }
     Ok(f)
+}
+
+/// Whether two sets serve the same names from the same files with the same facts.
+fn same_set(a: &BTreeMap<String, Entry>, b: &BTreeMap<String, Entry>) -> bool {
+    a.len() == b.len()
+        && a.iter().zip(b).all(|((na, ea), (nb, eb))| {
+            na == nb && ea.path == eb.path && ea.info.identity == eb.info.identity
+        })
 }
 
 /// The model's header facts for the file open as `file` (stat and header read from that

@@ -9,38 +9,10 @@ use std::time::{Duration, Instant};
 
 use tessera_serve::{ServeError, ServeOptions, Server};
 
-// ---------------------------------------------------------------- models
+mod common;
+use common::built;
 
-/// Builds a small sphere model (cached per process) and returns its bytes.
-fn built(seed: u64, triangles: u64) -> Vec<u8> {
-    let dir = tempfile::tempdir().unwrap();
-    let ply = dir.path().join("sphere.ply");
-    let tsr = dir.path().join("sphere.tsr");
-    tessera_gen::write_sphere(
-        &ply,
-        &tessera_gen::SphereOptions {
-            triangles,
-            seed,
-            colors: false,
-            noise: 0.05,
-        },
-        &tessera_gen::NoProgress,
-    )
-    .unwrap();
-    tessera_build::build(
-        &ply,
-        &tsr,
-        &tessera_build::BuildOptions {
-            leaf_triangles: 400,
-            node_triangles: 200,
-            threads: Some(2),
-            ..Default::default()
-        },
-        &tessera_build::NoProgress,
-    )
-    .unwrap();
-    std::fs::read(&tsr).unwrap()
-}
+// ---------------------------------------------------------------- models
 
 fn model_a() -> &'static [u8] {
     static M: OnceLock<Vec<u8>> = OnceLock::new();

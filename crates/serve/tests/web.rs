@@ -3,37 +3,15 @@
 //! catalogue unchanged; a directory without `index.html` is refused at start. Without
 //! it, the viewer built into the binary (`EMBEDDED_WEB`).
 
+mod common;
+
 use std::path::PathBuf;
 use std::time::Duration;
 
 use tessera_serve::{ServeError, ServeOptions, Server};
 
 fn model() -> Vec<u8> {
-    let dir = tempfile::tempdir().unwrap();
-    let ply = dir.path().join("s.ply");
-    let tsr = dir.path().join("s.tsr");
-    tessera_gen::write_sphere(
-        &ply,
-        &tessera_gen::SphereOptions {
-            triangles: 4_000,
-            ..Default::default()
-        },
-        &tessera_gen::NoProgress,
-    )
-    .unwrap();
-    tessera_build::build(
-        &ply,
-        &tsr,
-        &tessera_build::BuildOptions {
-            leaf_triangles: 400,
-            node_triangles: 200,
-            threads: Some(2),
-            ..Default::default()
-        },
-        &tessera_build::NoProgress,
-    )
-    .unwrap();
-    std::fs::read(&tsr).unwrap()
+    common::built(1, 4_000)
 }
 
 /// Serves `inputs` with `web` on a free loopback port until the returned sender drops.
