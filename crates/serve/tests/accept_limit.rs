@@ -10,7 +10,7 @@ use std::path::PathBuf;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use common::{capture_warnings, request, start_within, warnings_with};
+use common::{capture_warnings, quick_opts, request, warnings_with, TestServer};
 
 fn set_nofile(soft: u64) -> u64 {
     let mut r = libc::rlimit {
@@ -37,7 +37,7 @@ fn issue_29_accept_errors_are_rate_limited() {
     let tmp = tempfile::tempdir().unwrap();
     let one: PathBuf = tmp.path().join("a.tsr");
     std::fs::write(&one, common::built(3, 6_000)).unwrap();
-    let s = start_within(&[one], Duration::from_secs(10));
+    let s = TestServer::start(&[one], quick_opts()).unwrap();
     let port = s.addr.port();
     // The clients in a child process (the limit below is this process's): 60
     // connections, held open, made after the limit is lowered.

@@ -14,7 +14,7 @@ use std::path::Path;
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
-use common::{capture_warnings, request, start_within, warnings_with};
+use common::{capture_warnings, quick_opts, request, warnings_with, TestServer};
 
 fn model() -> &'static [u8] {
     static M: OnceLock<Vec<u8>> = OnceLock::new();
@@ -54,7 +54,7 @@ fn issue_29_fifos_are_skipped_without_blocking() {
     mkfifo(&dir.join("evil.tsr"));
     let lone = tmp.path().join("lone.tsr");
     mkfifo(&lone);
-    let s = start_within(&[dir.clone(), lone], Duration::from_secs(10));
+    let s = TestServer::start(&[dir.clone(), lone], quick_opts()).unwrap();
     assert_eq!(names(s.addr), ["a"]);
 
     // Added while serving: every catalogue request still answers at once.
@@ -103,7 +103,7 @@ fn issue_29_unservable_names_are_warned_about_once() {
     for b in bad {
         std::fs::write(dir.join(b), model()).unwrap();
     }
-    let s = start_within(std::slice::from_ref(&dir), Duration::from_secs(10));
+    let s = TestServer::start(std::slice::from_ref(&dir), quick_opts()).unwrap();
     for _ in 0..3 {
         assert_eq!(names(s.addr), ["ok"]);
     }
@@ -128,7 +128,7 @@ fn issue_29_options_answers_with_allow() {
     let tmp = tempfile::tempdir().unwrap();
     let one = tmp.path().join("a.tsr");
     std::fs::write(&one, model()).unwrap();
-    let s = start_within(&[one], Duration::from_secs(10));
+    let s = TestServer::start(&[one], quick_opts()).unwrap();
     for (path, extra) in [
         ("/models/a.tsr", ""),
         ("/api/models", ""),
@@ -160,7 +160,7 @@ fn issue_29_catalogue_of_1000_models_is_cached() {
         // Hard links: 1,000 names to open and check, one copy of the bytes on disk.
         std::fs::hard_link(&first, dir.join(format!("m{i:04}.tsr"))).unwrap();
     }
-    let s = start_within(std::slice::from_ref(&dir), Duration::from_secs(60));
+    let s = TestServer::start(std::slice::from_ref(&dir), quick_opts()).unwrap();
     let addr = s.addr;
     assert_eq!(names(addr).len(), 1000);
     let mut ms: Vec<f64> = (0..40)

@@ -8,17 +8,15 @@ mod common;
 use std::path::PathBuf;
 use std::time::Duration;
 
-use tessera_serve::{ServeError, ServeOptions, Server};
+use common::TestServer;
+use tessera_serve::{ServeError, ServeOptions};
 
 fn model() -> Vec<u8> {
     common::built(1, 4_000)
 }
 
-/// Serves `inputs` with `web` on a free loopback port until the returned sender drops.
-fn start(
-    inputs: Vec<PathBuf>,
-    web: PathBuf,
-) -> Result<(String, tokio::sync::oneshot::Sender<()>), ServeError> {
+/// Serves `inputs` with `web` on a free loopback port until the returned server drops.
+fn start(inputs: Vec<PathBuf>, web: PathBuf) -> Result<(String, TestServer), ServeError> {
     start_with(inputs, Some(web), true)
 }
 
@@ -27,39 +25,15 @@ fn start_with(
     inputs: Vec<PathBuf>,
     web: Option<PathBuf>,
     embedded_web: bool,
-) -> Result<(String, tokio::sync::oneshot::Sender<()>), ServeError> {
-    let (tx, rx) = tokio::sync::oneshot::channel::<()>();
-    let (ready_tx, ready_rx) = std::sync::mpsc::channel();
-    std::thread::spawn(move || {
-        let rt = tokio::runtime::Builder::new_multi_thread()
-            .worker_threads(1)
-            .enable_all()
-            .build()
-            .unwrap();
-        rt.block_on(async move {
-            let opts = ServeOptions {
-                addr: "127.0.0.1:0".parse().unwrap(),
-                web_dir: web,
-                embedded_web,
-                ..ServeOptions::default()
-            };
-            match Server::bind(&inputs, opts).await {
-                Ok(s) => {
-                    let _ = ready_tx.send(Ok(s.local_addr()));
-                    let _ = s
-                        .run(async {
-                            let _ = rx.await;
-                        })
-                        .await;
-                }
-                Err(e) => {
-                    let _ = ready_tx.send(Err(e));
-                }
-            }
-        });
-    });
-    let addr = ready_rx.recv().unwrap()?;
-    Ok((format!("http://{addr}"), tx))
+) -> Result<(String, TestServer), ServeError> {
+    let opts = ServeOptions {
+        addr: "127.0.0.1:0".parse().unwrap(),
+        web_dir: web,
+        embedded_web,
+        ..ServeOptions::default()
+    };
+    let s = TestServer::start(&inputs, opts)?;
+    Ok((s.url(""), s))
 }
 
 /// GET with `Accept-Encoding: accept`: status, Content-Encoding, Vary and the body as

@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use std::sync::{Mutex, OnceLock};
 use std::time::{Duration, Instant};
 
-use tessera_serve::{ServeOptions, Server};
+use tessera_serve::{ServeError, ServeOptions, Server};
 
 /// Builds a small sphere model (cached per process) and returns its bytes.
 pub fn built(seed: u64, triangles: u64) -> Vec<u8> {
@@ -97,64 +97,72 @@ pub fn warnings_with(parts: &[&str]) -> Vec<String> {
 
 // ---------------------------------------------------------------- server
 
-pub struct Running {
+/// A server on its own thread and runtime, stopped gracefully when dropped.
+pub struct TestServer {
     pub addr: SocketAddr,
     stop: Option<tokio::sync::oneshot::Sender<()>>,
+    thread: Option<std::thread::JoinHandle<Result<(), ServeError>>>,
 }
 
-impl Drop for Running {
-    fn drop(&mut self) {
+impl TestServer {
+    /// Binds and serves `inputs`; panics if that takes over 20 s (a startup that blocks,
+    /// as the old code did on a FIFO).
+    pub fn start(inputs: &[PathBuf], opts: ServeOptions) -> Result<TestServer, ServeError> {
+        let (tx, rx) = tokio::sync::oneshot::channel();
+        let (ready_tx, ready_rx) = std::sync::mpsc::channel();
+        let inputs = inputs.to_vec();
+        let thread = std::thread::spawn(move || {
+            let rt = tokio::runtime::Builder::new_multi_thread()
+                .worker_threads(2)
+                .enable_all()
+                .build()
+                .unwrap();
+            rt.block_on(async move {
+                let server = match Server::bind(&inputs, opts).await {
+                    Ok(s) => s,
+                    Err(e) => {
+                        let _ = ready_tx.send(Err(e));
+                        return Ok(());
+                    }
+                };
+                let _ = ready_tx.send(Ok(server.local_addr()));
+                server
+                    .run(async {
+                        let _ = rx.await;
+                    })
+                    .await
+            })
+        });
+        let addr = ready_rx
+            .recv_timeout(Duration::from_secs(20))
+            .expect("the server did not start within 20 s")?;
+        Ok(TestServer {
+            addr,
+            stop: Some(tx),
+            thread: Some(thread),
+        })
+    }
+
+    pub fn url(&self, path: &str) -> String {
+        format!("http://{}{path}", self.addr)
+    }
+
+    /// Signals shutdown and waits for the server to return; how long that took.
+    pub fn stop(&mut self) -> Duration {
+        let t = Instant::now();
         if let Some(s) = self.stop.take() {
             let _ = s.send(());
         }
+        if let Some(t) = self.thread.take() {
+            t.join().unwrap().unwrap();
+        }
+        t.elapsed()
     }
 }
 
-/// Starts a server on its own thread; panics if it is not serving within `limit`
-/// (the old code never was: its startup blocked in `open` on a FIFO).
-pub fn start_within(inputs: &[PathBuf], limit: Duration) -> Running {
-    let (ready_tx, ready_rx) = std::sync::mpsc::channel();
-    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
-    let inputs = inputs.to_vec();
-    std::thread::spawn(move || {
-        let rt = tokio::runtime::Builder::new_multi_thread()
-            .worker_threads(2)
-            .enable_all()
-            .build()
-            .unwrap();
-        rt.block_on(async move {
-            let opts = ServeOptions {
-                addr: "127.0.0.1:0".parse().unwrap(),
-                rescan_interval: Duration::from_millis(100),
-                embedded_web: false,
-                ..ServeOptions::default()
-            };
-            let server = match Server::bind(&inputs, opts).await {
-                Ok(s) => s,
-                Err(e) => {
-                    let _ = ready_tx.send(Err(e.to_string()));
-                    return;
-                }
-            };
-            let _ = ready_tx.send(Ok(server.local_addr()));
-            let _ = server
-                .run(async {
-                    let _ = stop_rx.await;
-                })
-                .await;
-        });
-    });
-    let t = Instant::now();
-    match ready_rx.recv_timeout(limit) {
-        Ok(Ok(addr)) => {
-            eprintln!("serving after {:?}", t.elapsed());
-            Running {
-                addr,
-                stop: Some(stop_tx),
-            }
-        }
-        Ok(Err(e)) => panic!("start failed: {e}"),
-        Err(_) => panic!("the server did not start within {limit:?}"),
+impl Drop for TestServer {
+    fn drop(&mut self) {
+        self.stop();
     }
 }
 
@@ -197,5 +205,16 @@ pub fn request(addr: SocketAddr, method: &str, path: &str, extra: &str) -> Resp 
         status,
         head,
         body: buf[end + 4..].to_vec(),
+    }
+}
+
+/// Options for the hostile-directory tests: a free port, rescans every 100 ms, no
+/// viewer.
+pub fn quick_opts() -> ServeOptions {
+    ServeOptions {
+        addr: "127.0.0.1:0".parse().unwrap(),
+        rescan_interval: Duration::from_millis(100),
+        embedded_web: false,
+        ..ServeOptions::default()
     }
 }
