@@ -80,6 +80,8 @@ pub mod fuzzing;
 mod http;
 mod models;
 mod range;
+#[doc(hidden)]
+pub mod testing;
 
 pub use range::MAX_PARTS;
 

@@ -361,6 +361,20 @@ impl Models {
         for d in &self.dirs {
             let entries = match std::fs::read_dir(d) {
                 Ok(e) => e,
+                Err(e) if is_resource_shortage(&e) => {
+                    // Out of descriptors or memory for now: keep serving what was there.
+                    scan.skipped.push(format!(
+                        "{}: cannot list directory now ({e}); its models are kept",
+                        d.display()
+                    ));
+                    for (name, entry) in old
+                        .iter()
+                        .filter(|(_, e)| e.from_dir && e.path.starts_with(d))
+                    {
+                        scan.set.insert(name.clone(), entry.clone());
+                    }
+                    continue;
+                }
                 Err(e) => {
                     scan.skipped
                         .push(format!("{}: cannot list directory: {e}", d.display()));
@@ -442,6 +456,17 @@ impl Models {
         }
         let file = match open_model(&path, from_dir) {
             Ok(f) => f,
+            Err(e) if is_resource_shortage(&e) => {
+                // EMFILE and the like say nothing about the file: keep it as it was.
+                if let Some(entry) = old.get(&name).filter(|e| e.path == path) {
+                    scan.set.insert(name, entry.clone());
+                }
+                scan.skipped.push(format!(
+                    "{}: cannot check now ({e}); kept as it was",
+                    path.display()
+                ));
+                return;
+            }
             Err(e) => {
                 scan.skipped
                     .push(format!("{}: skipped: {e}", path.display()));
@@ -506,6 +531,17 @@ pub fn open_regular(path: &Path, no_follow: bool) -> io::Result<File> {
     Ok(f)
 }
 
+/// Whether `e` is a shortage of the process or system (descriptors, memory) rather than
+/// something about the file: a rescan under `ulimit -n 64` must not unpublish models.
+fn is_resource_shortage(e: &io::Error) -> bool {
+    matches!(
+        e.raw_os_error(),
+        Some(
+            libc::EMFILE | libc::ENFILE | libc::ENOMEM | libc::ENOBUFS | libc::EAGAIN | libc::EINTR
+        )
+    )
+}
+
 /// Whether two sets serve the same names from the same files with the same facts.
 fn same_set(a: &BTreeMap<String, Entry>, b: &BTreeMap<String, Entry>) -> bool {
     a.len() == b.len()
@@ -538,4 +574,43 @@ pub fn validate(file: &File, known: Option<&ModelInfo>) -> Result<ModelInfo, Str
         format_version: h.version,
         nodes: h.node_count,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Issue 29: under `ulimit -n 64` a periodic rescan failed to list the served
+    /// directory ("cannot list directory: Too many open files") and unpublished every
+    /// model in it until descriptors were free again. Now what cannot be checked for
+    /// want of descriptors is kept as it was.
+    #[test]
+    fn a_rescan_out_of_descriptors_keeps_the_models() {
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path().join("d");
+        std::fs::create_dir(&dir).unwrap();
+        let ply = tmp.path().join("s.ply");
+        let opts = tessera_gen::SphereOptions {
+            triangles: 2_000,
+            ..Default::default()
+        };
+        tessera_gen::write_sphere(&ply, &opts, &tessera_gen::NoProgress).unwrap();
+        let b = tessera_build::BuildOptions {
+            threads: Some(1),
+            ..Default::default()
+        };
+        tessera_build::build(&ply, &dir.join("a.tsr"), &b, &tessera_build::NoProgress).unwrap();
+        let single = tmp.path().join("b.tsr");
+        std::fs::copy(dir.join("a.tsr"), &single).unwrap();
+        let models = Models::open(&[dir, single]).unwrap();
+        assert_eq!(models.snapshot().len(), 2);
+        // No new descriptor can be opened (0: whatever the numbers of the open ones).
+        let old = crate::testing::set_nofile(0);
+        models.rescan();
+        let kept = models.snapshot().len();
+        crate::testing::set_nofile(old);
+        assert_eq!(kept, 2, "models unpublished by a rescan out of descriptors");
+        models.rescan();
+        assert_eq!(models.snapshot().len(), 2);
+    }
 }
