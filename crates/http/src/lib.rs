@@ -118,6 +118,19 @@ pub enum ErrorClass {
     Corrupt,
 }
 
+impl ErrorClass {
+    /// How a report names patches that failed so: "unavailable", "changed on the
+    /// server", "refused by the server", "corrupt".
+    pub fn as_str(self) -> &'static str {
+        match self {
+            ErrorClass::Unavailable => "unavailable",
+            ErrorClass::Changed => "changed on the server",
+            ErrorClass::Refused => "refused by the server",
+            ErrorClass::Corrupt => "corrupt",
+        }
+    }
+}
+
 /// A failed request of an [`HttpSource`]: the message and its [`ErrorClass`]. It
 /// reaches callers inside [`FormatError::Io`] (use [`classify`]).
 #[derive(Debug, thiserror::Error)]
@@ -991,5 +1004,6 @@ mod tests {
         );
         let local = FormatError::io("f", std::io::Error::from(std::io::ErrorKind::NotFound));
         assert_eq!(classify(&local), ErrorClass::Unavailable);
+        assert_eq!(ErrorClass::Corrupt.as_str(), "corrupt");
     }
 }
