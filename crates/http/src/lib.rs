@@ -192,8 +192,8 @@ pub struct HttpSource {
     bytes_fetched: AtomicU64,
     requests: AtomicU64,
     slots: Slots,
-    /// The end of [`HttpOptions::deadline`].
-    deadline: Option<Instant>,
+    /// The end of [`HttpOptions::deadline`], and the deadline.
+    deadline: Option<(Instant, Duration)>,
     /// When the last read failed for want of the server, and why.
     down: Mutex<Option<(Instant, String)>>,
 }
@@ -380,7 +380,7 @@ impl HttpSource {
             bytes_fetched: AtomicU64::new(0),
             requests: AtomicU64::new(0),
             slots: Slots::default(),
-            deadline: opts.deadline.map(|d| started + d),
+            deadline: opts.deadline.map(|d| (started + d, d)),
             down: Mutex::new(None),
         };
         let mut redirects = 0;
@@ -432,7 +432,8 @@ impl HttpSource {
 
     fn error(&self, e: HttpError) -> FormatError {
         let kind = match e.class {
-            ErrorClass::Unavailable => std::io::ErrorKind::TimedOut,
+            ErrorClass::Unavailable if e.timed_out => std::io::ErrorKind::TimedOut,
+            ErrorClass::Unavailable => std::io::ErrorKind::Other,
             ErrorClass::Changed | ErrorClass::Refused | ErrorClass::Corrupt => {
                 std::io::ErrorKind::InvalidData
             }
@@ -445,16 +446,17 @@ impl HttpSource {
         let own = Instant::now()
             + READ_DEADLINE
             + Duration::from_secs_f64(bytes as f64 / MIN_BYTES_PER_S as f64);
-        self.deadline.map_or(own, |d| d.min(own))
+        self.deadline.map_or(own, |(d, _)| d.min(own))
     }
 
     /// The error every read gets during an [`UNAVAILABLE_COOLDOWN`] or past the
     /// overall deadline.
     fn down_now(&self) -> Option<HttpError> {
-        if self.deadline.is_some_and(|d| Instant::now() >= d) {
-            return Some(unavailable(
-                "the overall deadline of this model's reads has passed",
-            ));
+        if let Some((_, d)) = self.deadline.filter(|(end, _)| Instant::now() >= *end) {
+            return Some(unavailable(format!(
+                "the {} s allowed for reading this model have passed",
+                d.as_secs_f64()
+            )));
         }
         let down = self.down.lock().unwrap_or_else(|p| p.into_inner());
         let (at, why) = down.as_ref()?;

@@ -32,7 +32,7 @@
 //!   everything is rescanned every [`ServeOptions::rescan_interval`] (in-place
 //!   rewrites). 1,000 models: 25-34 ms a request and 2.1 s for 100 concurrent ones when
 //!   each rescanned, well under a millisecond a request cached (issue 29; the test
-//!   `catalogue_of_1000_models_is_cached` measures it). A file that is not a valid model,
+//!   `issue_29_catalogue_of_1000_models_is_cached` measures it). A file that is not a valid model,
 //!   a name that cannot be served (control characters, `\`, a leading `.`) and anything
 //!   that is not a regular file (a FIFO, a device, a socket: classified by `stat` and
 //!   opened with `O_NONBLOCK`, so it never blocks a scan or a request) are skipped with
