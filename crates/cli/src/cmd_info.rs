@@ -102,9 +102,23 @@ pub fn info_json(m: &ModelIndex, file: &str) -> serde_json::Value {
     })
 }
 
+/// Everything `info` reads from a remote model (the first request, the whole index and
+/// the root patches) must arrive within this; a stalled server fails sooner, at the
+/// client's own timeouts (nothing for 5 s, or a read slower than its deadline: see
+/// `tessera_http`). Before issue 29 a silent server took 180 s.
+const INFO_DEADLINE: std::time::Duration = std::time::Duration::from_secs(15);
+
 pub fn run(a: Args) -> anyhow::Result<ExitCode> {
-    let model =
-        crate::open::open_model(&a.model).with_context(|| format!("{}", a.model.display()))?;
+    let arg = a.model.to_string_lossy();
+    let model: std::sync::Arc<dyn tessera_format::PatchReader> = if tessera_http::is_url(&arg) {
+        let opts = tessera_http::HttpOptions {
+            deadline: Some(INFO_DEADLINE),
+        };
+        // The error names the URL already.
+        std::sync::Arc::new(tessera_http::RemoteModel::open_with(&arg, &opts)?)
+    } else {
+        crate::open::open_model(&a.model).with_context(|| format!("{}", a.model.display()))?
+    };
     let m = model.index();
     let mut j = info_json(m, &a.model.display().to_string());
     // The extent of the coarsest level (root patches) and the up axis guessed from it,

@@ -13,7 +13,7 @@ use bytes::Bytes;
 use tower_http::cors::{Any, CorsLayer};
 
 use crate::body::{FileBody, Logged, Segment};
-use crate::models::{open_model, validate, Models};
+use crate::models::{open_model, open_regular, validate, Models};
 use crate::range::{self, Ranges};
 
 /// What every handler shares.
@@ -72,7 +72,23 @@ pub fn router(shared: St) -> Router {
         .fallback(dispatch)
         .with_state(shared)
         .layer(cors)
+        .layer(axum::middleware::from_fn(allow_on_options))
         .layer(axum::middleware::from_fn(access_log))
+}
+
+/// The methods every resource here allows.
+const ALLOW: &str = "GET, HEAD, OPTIONS";
+
+/// tower-http's CORS layer answers every `OPTIONS` itself (as a preflight, `200`,
+/// without `Allow`); RFC 9110 section 9.3.7 wants `Allow` on an `OPTIONS` answer.
+async fn allow_on_options(req: Request, next: Next) -> Response<Body> {
+    let options = req.method() == Method::OPTIONS;
+    let mut resp = next.run(req).await;
+    if options && !resp.headers().contains_key(header::ALLOW) {
+        resp.headers_mut()
+            .insert(header::ALLOW, HeaderValue::from_static(ALLOW));
+    }
+    resp
 }
 
 async fn access_log(req: Request, next: Next) -> Response<Body> {
@@ -114,10 +130,8 @@ async fn dispatch(AxState(st): AxState<St>, req: Request) -> Response<Body> {
     if method == Method::OPTIONS {
         // Not a CORS preflight (the CORS layer answers those): say what is allowed.
         let mut r = empty(StatusCode::NO_CONTENT);
-        r.headers_mut().insert(
-            header::ALLOW,
-            HeaderValue::from_static("GET, HEAD, OPTIONS"),
-        );
+        r.headers_mut()
+            .insert(header::ALLOW, HeaderValue::from_static(ALLOW));
         return r;
     }
     if method != Method::GET && method != Method::HEAD {
@@ -125,10 +139,8 @@ async fn dispatch(AxState(st): AxState<St>, req: Request) -> Response<Body> {
             StatusCode::METHOD_NOT_ALLOWED,
             "only GET, HEAD and OPTIONS\n",
         );
-        r.headers_mut().insert(
-            header::ALLOW,
-            HeaderValue::from_static("GET, HEAD, OPTIONS"),
-        );
+        r.headers_mut()
+            .insert(header::ALLOW, HeaderValue::from_static(ALLOW));
         return r;
     }
     let head = method == Method::HEAD;
@@ -243,9 +255,16 @@ async fn static_file(st: &St, headers: &HeaderMap, path: &str) -> Response<Body>
             let root = root.clone();
             tokio::task::spawn_blocking(move || {
                 let p = std::fs::canonicalize(root.join(&rel)).ok()?;
-                if !p.starts_with(&root) || !p.is_file() {
+                if !p.starts_with(&root) {
                     return None;
                 }
+                // A FIFO or device in the directory is refused, never opened blocking.
+                let read = |p: &std::path::Path| -> Option<Vec<u8>> {
+                    let mut f = open_regular(p, true).ok()?;
+                    let mut b = Vec::new();
+                    std::io::Read::read_to_end(&mut f, &mut b).ok()?;
+                    Some(b)
+                };
                 if gzip {
                     let mut gz = p.clone().into_os_string();
                     gz.push(".gz");
@@ -253,16 +272,16 @@ async fn static_file(st: &St, headers: &HeaderMap, path: &str) -> Response<Body>
                     let modified =
                         |p: &std::path::Path| std::fs::metadata(p).and_then(|m| m.modified()).ok();
                     let fresh = modified(&gz).zip(modified(&p)).is_some_and(|(g, f)| g >= f);
-                    let inside = std::fs::canonicalize(&gz).is_ok_and(|g| g.starts_with(&root));
-                    if fresh && inside {
-                        if let Ok(b) = std::fs::read(&gz) {
+                    let inside = std::fs::canonicalize(&gz)
+                        .ok()
+                        .filter(|g| g.starts_with(&root));
+                    if let (true, Some(gz)) = (fresh, inside) {
+                        if let Some(b) = read(&gz) {
                             return Some((bytes::Bytes::from(b), true));
                         }
                     }
                 }
-                std::fs::read(p)
-                    .ok()
-                    .map(|b| (bytes::Bytes::from(b), false))
+                read(&p).map(|b| (bytes::Bytes::from(b), false))
             })
             .await
             .ok()
@@ -343,18 +362,36 @@ pub fn encode_name(name: &str) -> String {
 
 async fn catalogue(st: &St) -> Response<Body> {
     let st2 = st.clone();
-    // New builds in a served directory appear here without a restart.
-    let _ = tokio::task::spawn_blocking(move || st2.models.rescan()).await;
-    let models: Vec<serde_json::Value> = st
-        .models
-        .snapshot()
-        .into_iter()
+    // New builds in a served directory appear here without a restart: a stat of each
+    // input, a rescan only when one changed, the body rebuilt only when the set did.
+    let body = tokio::task::spawn_blocking(move || {
+        st2.models.refresh();
+        st2.models.catalogue_json(catalogue_body)
+    })
+    .await
+    .unwrap_or_else(|_| Bytes::from_static(b"{\"models\": []}\n"));
+    let n = body.len();
+    let mut r = Response::new(Body::from(body));
+    let h = r.headers_mut();
+    h.insert(
+        header::CONTENT_TYPE,
+        HeaderValue::from_static("application/json"),
+    );
+    h.insert(header::CONTENT_LENGTH, HeaderValue::from(n));
+    h.insert(header::CACHE_CONTROL, HeaderValue::from_static("no-cache"));
+    r
+}
+
+/// The catalogue's JSON for a served set.
+fn catalogue_body(set: &std::collections::BTreeMap<String, crate::models::Entry>) -> Vec<u8> {
+    let models: Vec<serde_json::Value> = set
+        .iter()
         .map(|(file, e)| {
             let i = &e.info;
-            let name = file.strip_suffix(".tsr").unwrap_or(&file).to_string();
+            let name = file.strip_suffix(".tsr").unwrap_or(file).to_string();
             serde_json::json!({
                 "name": name,
-                "url": format!("/models/{}", encode_name(&file)),
+                "url": format!("/models/{}", encode_name(file)),
                 "bytes": i.identity.size(),
                 "triangles": i.triangles,
                 "bounding_sphere": {
@@ -370,16 +407,7 @@ async fn catalogue(st: &St) -> Response<Body> {
     let mut body =
         serde_json::to_vec_pretty(&serde_json::json!({ "models": models })).unwrap_or_default();
     body.push(b'\n');
-    let n = body.len();
-    let mut r = Response::new(Body::from(body));
-    let h = r.headers_mut();
-    h.insert(
-        header::CONTENT_TYPE,
-        HeaderValue::from_static("application/json"),
-    );
-    h.insert(header::CONTENT_LENGTH, HeaderValue::from(n));
-    h.insert(header::CACHE_CONTROL, HeaderValue::from_static("no-cache"));
-    r
+    body
 }
 
 /// An entity-tag list (`If-Match`, `If-None-Match`): `Any` for `*`.

@@ -27,9 +27,17 @@
 //! - Bodies are never compressed (no `Content-Encoding` at all).
 //! - `GET /api/models`: the JSON catalogue `{"models": [{name, url, bytes, triangles,
 //!   bounding_sphere: {center, radius}, format_version, nodes, etag}]}` from each file's
-//!   header. Served directories are rescanned for each catalogue request and every
-//!   [`ServeOptions::rescan_interval`]. A file that is not a valid model is skipped with
-//!   a warning (and not served).
+//!   header, cached: a catalogue request stats the served directories and files and
+//!   rescans only when one changed (a new build renamed in changes its directory), and
+//!   everything is rescanned every [`ServeOptions::rescan_interval`] (in-place
+//!   rewrites). 1,000 models: 25-34 ms a request and 2.1 s for 100 concurrent ones when
+//!   each rescanned, well under a millisecond a request cached (issue 29; the test
+//!   `issue_29_catalogue_of_1000_models_is_cached` measures it). A file that is not a valid model,
+//!   a name that cannot be served (control characters, `\`, a leading `.`) and anything
+//!   that is not a regular file (a FIFO, a device, a socket: classified by `stat` and
+//!   opened with `O_NONBLOCK`, so it never blocks a scan or a request) are skipped with
+//!   one warning each, not repeated by later scans.
+//! - `OPTIONS` (CORS preflight or not) answers with `Allow: GET, HEAD, OPTIONS`.
 //! - With [`ServeOptions::web_dir`] (`tessera serve --web DIR`): the browser viewer's
 //!   static files, `GET /` its `index.html`, `GET /NAME` (also in subdirectories) the
 //!   file of that name under the directory, each path segment percent-decoded and
@@ -62,7 +70,8 @@
 //! stops reading is dropped), a request handling timeout, graceful shutdown that finishes
 //! in-flight responses (bounded by [`ServeOptions::shutdown_grace`]), and an access log
 //! through `tracing` (target `tessera_serve::access`, level info: method, path, status,
-//! bytes sent, milliseconds).
+//! bytes sent, milliseconds). Failing accepts (descriptors exhausted) are logged at most
+//! once a second with a count and back off (50 ms doubling to 1 s) until one succeeds.
 
 mod body;
 mod conn;
@@ -71,6 +80,8 @@ pub mod fuzzing;
 mod http;
 mod models;
 mod range;
+#[doc(hidden)]
+pub mod testing;
 
 pub use range::MAX_PARTS;
 

@@ -2,16 +2,29 @@
 //!
 //! Requests are resolved by looking a decoded name up in this set, never by joining a
 //! request path onto the file system. The set is built at startup from the inputs
-//! (model files and directories) and rebuilt from them by [`Models::rescan`] (on every
-//! catalogue request and periodically), so new builds in a served directory appear and
-//! removed ones disappear.
+//! (model files and directories) and rebuilt from them by [`Models::rescan`]
+//! (periodically, and by [`Models::refresh`] when a served directory or file changed),
+//! so new builds in a served directory appear and removed ones disappear.
+//!
+//! Nothing here may block on what lies in a directory: a FIFO named `x.tsr` blocks a
+//! plain `open` until a writer appears (issue 29), so every entry is classified by its
+//! directory entry type and `stat` first, and opened with `O_NONBLOCK` and checked
+//! again on the descriptor ([`open_regular`]). Every skipped name is warned about once,
+//! not on every scan.
+//!
+//! The catalogue is cached: a request stats the served directories and files (a few
+//! system calls) and rescans only when one of them changed; the JSON body is built once
+//! per change of the set ([`Models::catalogue_json`]). 1,000 models: a rescan costs
+//! tens of milliseconds, a cached catalogue request well under one.
 
 use std::collections::{BTreeMap, HashSet};
 use std::fs::File;
 use std::hash::{Hash, Hasher};
 use std::io;
+use std::os::unix::ffi::OsStrExt;
 use std::os::unix::fs::{FileExt, MetadataExt, OpenOptionsExt};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Mutex, RwLock};
 use std::time::{Duration, SystemTime};
 
@@ -93,6 +106,42 @@ pub struct Models {
     set: RwLock<BTreeMap<String, Entry>>,
     /// Warnings already logged (so a rescan every few seconds does not repeat them).
     warned: Mutex<HashSet<String>>,
+    /// What the inputs looked like when the current set was scanned (taken before the
+    /// scan): a refresh rescans only when this changed. Held while a rescan runs, so
+    /// concurrent requests wait for one rescan instead of running their own.
+    stamp: Mutex<Vec<Option<Stamp>>>,
+    /// Bumped whenever the set (or an entry's info) changes.
+    generation: AtomicU64,
+    /// The catalogue's JSON body and the generation it was built for.
+    catalogue: Mutex<Option<(u64, bytes::Bytes)>>,
+}
+
+/// What a served directory or file looked like: a directory's mtime changes when an
+/// entry is created, removed or renamed into it (a new build lands by rename).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Stamp {
+    dev: u64,
+    ino: u64,
+    size: u64,
+    mtime_s: i64,
+    mtime_ns: i64,
+    ctime_s: i64,
+    ctime_ns: i64,
+}
+
+impl Stamp {
+    fn of(p: &Path) -> Option<Stamp> {
+        let m = std::fs::metadata(p).ok()?;
+        Some(Stamp {
+            dev: m.dev(),
+            ino: m.ino(),
+            size: m.size(),
+            mtime_s: m.mtime(),
+            mtime_ns: m.mtime_nsec(),
+            ctime_s: m.ctime(),
+            ctime_ns: m.ctime_nsec(),
+        })
+    }
 }
 
 /// Why the inputs give no served set at all.
@@ -155,7 +204,11 @@ impl Models {
             dirs,
             set: RwLock::new(BTreeMap::new()),
             warned: Mutex::new(HashSet::new()),
+            stamp: Mutex::new(Vec::new()),
+            generation: AtomicU64::new(0),
+            catalogue: Mutex::new(None),
         };
+        *models.stamp.lock().unwrap_or_else(|e| e.into_inner()) = models.stamps();
         let scan = models.scan(&BTreeMap::new());
         if let Some((name, first, second)) = scan.clashes.into_iter().next() {
             return Err(StartError::NameClash {
@@ -176,9 +229,38 @@ impl Models {
         Ok(models)
     }
 
+    /// The stamps of the inputs now: directories first, then files.
+    fn stamps(&self) -> Vec<Option<Stamp>> {
+        self.dirs
+            .iter()
+            .chain(&self.files)
+            .map(|p| Stamp::of(p))
+            .collect()
+    }
+
+    /// Rescans if a served directory or file changed since the last scan (blocking: a
+    /// `stat` per input, and the rescan when needed). A change within the same clock
+    /// tick as the scan before it is caught by the periodic [`Models::rescan`].
+    pub fn refresh(&self) {
+        let mut last = self.stamp.lock().unwrap_or_else(|e| e.into_inner());
+        let now = self.stamps();
+        if *last == now {
+            return;
+        }
+        *last = now;
+        self.rescan_now();
+    }
+
     /// Rebuilds the served set from the inputs (blocking: it lists directories and reads
     /// headers of new or changed files).
     pub fn rescan(&self) {
+        let mut last = self.stamp.lock().unwrap_or_else(|e| e.into_inner());
+        *last = self.stamps();
+        self.rescan_now();
+    }
+
+    /// The rescan itself (the caller holds `stamp`).
+    fn rescan_now(&self) {
         let old = self.snapshot();
         let scan = self.scan(&old);
         for s in &scan.skipped {
@@ -191,7 +273,30 @@ impl Models {
                 first.display()
             ));
         }
+        let changed = !same_set(&old, &scan.set);
         *self.set.write().unwrap_or_else(|e| e.into_inner()) = scan.set;
+        if changed {
+            self.generation.fetch_add(1, Ordering::SeqCst);
+        }
+    }
+
+    /// The catalogue's JSON body for the current set, built once per change; `build`
+    /// makes it from a snapshot.
+    pub fn catalogue_json(
+        &self,
+        build: impl FnOnce(&BTreeMap<String, Entry>) -> Vec<u8>,
+    ) -> bytes::Bytes {
+        let mut c = self.catalogue.lock().unwrap_or_else(|e| e.into_inner());
+        // Read the generation before the set: a change after it rebuilds next time.
+        let generation = self.generation.load(Ordering::SeqCst);
+        if let Some((g, body)) = c.as_ref() {
+            if *g == generation {
+                return body.clone();
+            }
+        }
+        let body = bytes::Bytes::from(build(&self.snapshot()));
+        *c = Some((generation, body.clone()));
+        body
     }
 
     /// The current set.
@@ -217,6 +322,7 @@ impl Models {
             .get_mut(name)
         {
             e.info = info;
+            self.generation.fetch_add(1, Ordering::SeqCst);
         }
     }
 
@@ -255,6 +361,20 @@ impl Models {
         for d in &self.dirs {
             let entries = match std::fs::read_dir(d) {
                 Ok(e) => e,
+                Err(e) if is_resource_shortage(&e) => {
+                    // Out of descriptors or memory for now: keep serving what was there.
+                    scan.skipped.push(format!(
+                        "{}: cannot list directory now ({e}); its models are kept",
+                        d.display()
+                    ));
+                    for (name, entry) in old
+                        .iter()
+                        .filter(|(_, e)| e.from_dir && e.path.starts_with(d))
+                    {
+                        scan.set.insert(name.clone(), entry.clone());
+                    }
+                    continue;
+                }
                 Err(e) => {
                     scan.skipped
                         .push(format!("{}: cannot list directory: {e}", d.display()));
@@ -264,13 +384,35 @@ impl Models {
             let mut names: Vec<(String, PathBuf)> = Vec::new();
             for e in entries.flatten() {
                 let path = e.path();
-                let Some(name) = e.file_name().to_str().map(str::to_string) else {
-                    continue;
-                };
-                if !name.ends_with(".tsr") || !servable_name(&name) {
+                let raw = e.file_name();
+                if !raw.as_bytes().ends_with(b".tsr") {
                     continue;
                 }
-                names.push((name, path));
+                let Some(name) = raw.to_str().filter(|n| servable_name(n)) else {
+                    // Quoted: a name may hold a newline or other control characters.
+                    scan.skipped.push(format!(
+                        "{:?}: skipped: names with control characters, `\\`, a leading `.` \
+                         or invalid UTF-8 are not served",
+                        path
+                    ));
+                    continue;
+                };
+                // The entry's own type (lstat, no open): a FIFO, socket, device or
+                // directory is skipped before anything could block on it; a symbolic
+                // link is resolved and checked below.
+                match e.file_type() {
+                    Ok(t) if t.is_file() || t.is_symlink() => {}
+                    Ok(_) => {
+                        scan.skipped
+                            .push(format!("{path:?}: skipped: not a regular file"));
+                        continue;
+                    }
+                    Err(err) => {
+                        scan.skipped.push(format!("{path:?}: skipped: {err}"));
+                        continue;
+                    }
+                }
+                names.push((name.to_string(), path));
             }
             names.sort();
             for (name, path) in names {
@@ -314,6 +456,17 @@ impl Models {
         }
         let file = match open_model(&path, from_dir) {
             Ok(f) => f,
+            Err(e) if is_resource_shortage(&e) => {
+                // EMFILE and the like say nothing about the file: keep it as it was.
+                if let Some(entry) = old.get(&name).filter(|e| e.path == path) {
+                    scan.set.insert(name, entry.clone());
+                }
+                scan.skipped.push(format!(
+                    "{}: cannot check now ({e}); kept as it was",
+                    path.display()
+                ));
+                return;
+            }
             Err(e) => {
                 scan.skipped
                     .push(format!("{}: skipped: {e}", path.display()));
@@ -345,16 +498,56 @@ impl Models {
 /// Opens a served file for reading: never through a symbolic link for directory
 /// entries (their path is canonical), and only regular files.
 pub fn open_model(path: &Path, from_dir: bool) -> io::Result<File> {
+    open_regular(path, from_dir)
+}
+
+/// Opens `path` for reading if it is a regular file, without ever blocking on what it
+/// is: a `stat` first (a FIFO, device or socket is refused before any `open`), then an
+/// `open` with `O_NONBLOCK` (a FIFO swapped in between opens at once instead of
+/// waiting for a writer) and the descriptor checked again. `no_follow` adds
+/// `O_NOFOLLOW` (for canonical paths: a symbolic link swapped in is refused). Reads of
+/// a regular file ignore `O_NONBLOCK`.
+pub fn open_regular(path: &Path, no_follow: bool) -> io::Result<File> {
+    let not_regular = || io::Error::other("not a regular file");
+    let meta = if no_follow {
+        std::fs::symlink_metadata(path)?
+    } else {
+        std::fs::metadata(path)?
+    };
+    if !meta.is_file() {
+        return Err(not_regular());
+    }
     let mut o = std::fs::OpenOptions::new();
     o.read(true);
-    if from_dir {
-        o.custom_flags(libc::O_NOFOLLOW);
+    let mut flags = libc::O_NONBLOCK;
+    if no_follow {
+        flags |= libc::O_NOFOLLOW;
     }
+    o.custom_flags(flags);
     let f = o.open(path)?;
     if !f.metadata()?.is_file() {
-        return Err(io::Error::other("not a regular file"));
+        return Err(not_regular());
     }
     Ok(f)
+}
+
+/// Whether `e` is a shortage of the process or system (descriptors, memory) rather than
+/// something about the file: a rescan under `ulimit -n 64` must not unpublish models.
+fn is_resource_shortage(e: &io::Error) -> bool {
+    matches!(
+        e.raw_os_error(),
+        Some(
+            libc::EMFILE | libc::ENFILE | libc::ENOMEM | libc::ENOBUFS | libc::EAGAIN | libc::EINTR
+        )
+    )
+}
+
+/// Whether two sets serve the same names from the same files with the same facts.
+fn same_set(a: &BTreeMap<String, Entry>, b: &BTreeMap<String, Entry>) -> bool {
+    a.len() == b.len()
+        && a.iter().zip(b).all(|((na, ea), (nb, eb))| {
+            na == nb && ea.path == eb.path && ea.info.identity == eb.info.identity
+        })
 }
 
 /// The model's header facts for the file open as `file` (stat and header read from that
@@ -381,4 +574,43 @@ pub fn validate(file: &File, known: Option<&ModelInfo>) -> Result<ModelInfo, Str
         format_version: h.version,
         nodes: h.node_count,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Issue 29: under `ulimit -n 64` a periodic rescan failed to list the served
+    /// directory ("cannot list directory: Too many open files") and unpublished every
+    /// model in it until descriptors were free again. Now what cannot be checked for
+    /// want of descriptors is kept as it was.
+    #[test]
+    fn a_rescan_out_of_descriptors_keeps_the_models() {
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path().join("d");
+        std::fs::create_dir(&dir).unwrap();
+        let ply = tmp.path().join("s.ply");
+        let opts = tessera_gen::SphereOptions {
+            triangles: 2_000,
+            ..Default::default()
+        };
+        tessera_gen::write_sphere(&ply, &opts, &tessera_gen::NoProgress).unwrap();
+        let b = tessera_build::BuildOptions {
+            threads: Some(1),
+            ..Default::default()
+        };
+        tessera_build::build(&ply, &dir.join("a.tsr"), &b, &tessera_build::NoProgress).unwrap();
+        let single = tmp.path().join("b.tsr");
+        std::fs::copy(dir.join("a.tsr"), &single).unwrap();
+        let models = Models::open(&[dir, single]).unwrap();
+        assert_eq!(models.snapshot().len(), 2);
+        // No new descriptor can be opened (0: whatever the numbers of the open ones).
+        let old = crate::testing::set_nofile(0);
+        models.rescan();
+        let kept = models.snapshot().len();
+        crate::testing::set_nofile(old);
+        assert_eq!(kept, 2, "models unpublished by a rescan out of descriptors");
+        models.rescan();
+        assert_eq!(models.snapshot().len(), 2);
+    }
 }

@@ -7,40 +7,12 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
-use tessera_serve::{ServeError, ServeOptions, Server};
+use tessera_serve::{ServeError, ServeOptions};
+
+mod common;
+use common::{built, TestServer};
 
 // ---------------------------------------------------------------- models
-
-/// Builds a small sphere model (cached per process) and returns its bytes.
-fn built(seed: u64, triangles: u64) -> Vec<u8> {
-    let dir = tempfile::tempdir().unwrap();
-    let ply = dir.path().join("sphere.ply");
-    let tsr = dir.path().join("sphere.tsr");
-    tessera_gen::write_sphere(
-        &ply,
-        &tessera_gen::SphereOptions {
-            triangles,
-            seed,
-            colors: false,
-            noise: 0.05,
-        },
-        &tessera_gen::NoProgress,
-    )
-    .unwrap();
-    tessera_build::build(
-        &ply,
-        &tsr,
-        &tessera_build::BuildOptions {
-            leaf_triangles: 400,
-            node_triangles: 200,
-            threads: Some(2),
-            ..Default::default()
-        },
-        &tessera_build::NoProgress,
-    )
-    .unwrap();
-    std::fs::read(&tsr).unwrap()
-}
 
 fn model_a() -> &'static [u8] {
     static M: OnceLock<Vec<u8>> = OnceLock::new();
@@ -63,70 +35,6 @@ fn replace(path: &Path, bytes: &[u8]) {
 }
 
 // ---------------------------------------------------------------- server
-
-struct TestServer {
-    addr: SocketAddr,
-    stop: Option<tokio::sync::oneshot::Sender<()>>,
-    thread: Option<std::thread::JoinHandle<Result<(), ServeError>>>,
-}
-
-impl TestServer {
-    fn start(inputs: &[PathBuf], opts: ServeOptions) -> Result<TestServer, ServeError> {
-        let (tx, rx) = tokio::sync::oneshot::channel();
-        let (ready_tx, ready_rx) = std::sync::mpsc::channel();
-        let inputs = inputs.to_vec();
-        let thread = std::thread::spawn(move || {
-            let rt = tokio::runtime::Builder::new_multi_thread()
-                .worker_threads(2)
-                .enable_all()
-                .build()
-                .unwrap();
-            rt.block_on(async move {
-                let server = match Server::bind(&inputs, opts).await {
-                    Ok(s) => s,
-                    Err(e) => {
-                        let _ = ready_tx.send(Err(e));
-                        return Ok(());
-                    }
-                };
-                let _ = ready_tx.send(Ok(server.local_addr()));
-                server
-                    .run(async {
-                        let _ = rx.await;
-                    })
-                    .await
-            })
-        });
-        let addr = ready_rx.recv().unwrap()?;
-        Ok(TestServer {
-            addr,
-            stop: Some(tx),
-            thread: Some(thread),
-        })
-    }
-
-    fn url(&self, path: &str) -> String {
-        format!("http://{}{path}", self.addr)
-    }
-
-    /// Signals shutdown and waits for the server to return; how long that took.
-    fn stop(&mut self) -> Duration {
-        let t = Instant::now();
-        if let Some(s) = self.stop.take() {
-            let _ = s.send(());
-        }
-        if let Some(t) = self.thread.take() {
-            t.join().unwrap().unwrap();
-        }
-        t.elapsed()
-    }
-}
-
-impl Drop for TestServer {
-    fn drop(&mut self) {
-        self.stop();
-    }
-}
 
 fn opts() -> ServeOptions {
     ServeOptions {

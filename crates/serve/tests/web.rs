@@ -3,44 +3,20 @@
 //! catalogue unchanged; a directory without `index.html` is refused at start. Without
 //! it, the viewer built into the binary (`EMBEDDED_WEB`).
 
+mod common;
+
 use std::path::PathBuf;
 use std::time::Duration;
 
-use tessera_serve::{ServeError, ServeOptions, Server};
+use common::TestServer;
+use tessera_serve::{ServeError, ServeOptions};
 
 fn model() -> Vec<u8> {
-    let dir = tempfile::tempdir().unwrap();
-    let ply = dir.path().join("s.ply");
-    let tsr = dir.path().join("s.tsr");
-    tessera_gen::write_sphere(
-        &ply,
-        &tessera_gen::SphereOptions {
-            triangles: 4_000,
-            ..Default::default()
-        },
-        &tessera_gen::NoProgress,
-    )
-    .unwrap();
-    tessera_build::build(
-        &ply,
-        &tsr,
-        &tessera_build::BuildOptions {
-            leaf_triangles: 400,
-            node_triangles: 200,
-            threads: Some(2),
-            ..Default::default()
-        },
-        &tessera_build::NoProgress,
-    )
-    .unwrap();
-    std::fs::read(&tsr).unwrap()
+    common::built(1, 4_000)
 }
 
-/// Serves `inputs` with `web` on a free loopback port until the returned sender drops.
-fn start(
-    inputs: Vec<PathBuf>,
-    web: PathBuf,
-) -> Result<(String, tokio::sync::oneshot::Sender<()>), ServeError> {
+/// Serves `inputs` with `web` on a free loopback port until the returned server drops.
+fn start(inputs: Vec<PathBuf>, web: PathBuf) -> Result<(String, TestServer), ServeError> {
     start_with(inputs, Some(web), true)
 }
 
@@ -49,39 +25,15 @@ fn start_with(
     inputs: Vec<PathBuf>,
     web: Option<PathBuf>,
     embedded_web: bool,
-) -> Result<(String, tokio::sync::oneshot::Sender<()>), ServeError> {
-    let (tx, rx) = tokio::sync::oneshot::channel::<()>();
-    let (ready_tx, ready_rx) = std::sync::mpsc::channel();
-    std::thread::spawn(move || {
-        let rt = tokio::runtime::Builder::new_multi_thread()
-            .worker_threads(1)
-            .enable_all()
-            .build()
-            .unwrap();
-        rt.block_on(async move {
-            let opts = ServeOptions {
-                addr: "127.0.0.1:0".parse().unwrap(),
-                web_dir: web,
-                embedded_web,
-                ..ServeOptions::default()
-            };
-            match Server::bind(&inputs, opts).await {
-                Ok(s) => {
-                    let _ = ready_tx.send(Ok(s.local_addr()));
-                    let _ = s
-                        .run(async {
-                            let _ = rx.await;
-                        })
-                        .await;
-                }
-                Err(e) => {
-                    let _ = ready_tx.send(Err(e));
-                }
-            }
-        });
-    });
-    let addr = ready_rx.recv().unwrap()?;
-    Ok((format!("http://{addr}"), tx))
+) -> Result<(String, TestServer), ServeError> {
+    let opts = ServeOptions {
+        addr: "127.0.0.1:0".parse().unwrap(),
+        web_dir: web,
+        embedded_web,
+        ..ServeOptions::default()
+    };
+    let s = TestServer::start(&inputs, opts)?;
+    Ok((s.url(""), s))
 }
 
 /// GET with `Accept-Encoding: accept`: status, Content-Encoding, Vary and the body as

@@ -214,7 +214,7 @@ impl Proxy {
 }
 
 /// The request head (through the blank line), or `None` at end of stream.
-fn read_head(c: &mut TcpStream) -> Option<Vec<u8>> {
+pub fn read_head(c: &mut TcpStream) -> Option<Vec<u8>> {
     let mut buf = Vec::new();
     let mut byte = [0u8; 1];
     while !buf.ends_with(b"\r\n\r\n") {
