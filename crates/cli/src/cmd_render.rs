@@ -272,48 +272,67 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
             "remote: {b0} bytes in {r0} requests before the first frame, {b} bytes in {r} requests in all"
         );
     }
-    report_skipped(&viewer, mode);
+    report_skipped(&viewer, mode)?;
     Ok(ExitCode::SUCCESS)
 }
 
-/// Says what became of patches that could not be read, truthfully for the mode: in a
-/// level-of-detail frame a failed node's parent is drawn instead (a failed root leaves
-/// its part of the model empty); at full resolution only leaves are drawn, so a failed
-/// leaf leaves a hole.
-fn report_skipped(viewer: &Viewer, mode: Mode) {
-    let failed = viewer.scheduler().failed();
-    if failed.is_empty() {
-        return;
+/// Says what became of patches that could not be read, truthfully for the mode and the
+/// cause: corrupt ones (bad bytes: never retried) leave their parent drawn in a
+/// level-of-detail frame (a failed root leaves its part of the model empty; at full
+/// resolution, which draws leaves only, a hole); unavailable ones (the disk or the
+/// server failed to deliver them) make complete and full-resolution frames incomplete,
+/// which is an error: the frames written are not what was asked for.
+fn report_skipped(viewer: &Viewer, mode: Mode) -> anyhow::Result<()> {
+    let (mut corrupt, mut corrupt_roots, mut unavailable) = (0, 0, 0);
+    for i in 0..viewer.model_count() {
+        let s = viewer.scheduler_of(i);
+        let index = viewer.index_of(i);
+        for &n in s.failed() {
+            if s.is_retrying(n) {
+                unavailable += 1;
+            } else {
+                corrupt += 1;
+                let root = index
+                    .nodes()
+                    .get(n as usize)
+                    .is_some_and(|r| r.parent == tessera_format::NO_NODE);
+                corrupt_roots += usize::from(root);
+            }
+        }
     }
-    let index = viewer.index();
-    let roots = failed
-        .iter()
-        .filter(|&&n| {
-            index
-                .nodes()
-                .get(n as usize)
-                .is_some_and(|r| r.parent == tessera_format::NO_NODE)
-        })
-        .count();
-    let n = failed.len();
-    if mode == Mode::FullResolution {
-        eprintln!(
-            "warning: {n} corrupt patch(es) skipped; full resolution draws leaves only, so \
-             their parts of the model are missing from the frames"
-        );
-    } else if roots == n {
-        eprintln!(
-            "warning: {n} corrupt root patch(es) skipped; their parts of the model are missing"
-        );
-    } else if roots > 0 {
-        eprintln!(
-            "warning: {n} corrupt patch(es) skipped: for {} their parents were drawn instead; \
-             {roots} were roots, whose parts of the model are missing",
-            n - roots
-        );
-    } else {
-        eprintln!("warning: {n} corrupt patch(es) skipped; their parents were drawn instead");
+    if corrupt > 0 {
+        let (n, roots) = (corrupt, corrupt_roots);
+        if mode == Mode::FullResolution {
+            eprintln!(
+                "warning: {n} corrupt patch(es) skipped; full resolution draws leaves only, so \
+                 their parts of the model are missing from the frames"
+            );
+        } else if roots == n {
+            eprintln!(
+                "warning: {n} corrupt root patch(es) skipped; their parts of the model are missing"
+            );
+        } else if roots > 0 {
+            eprintln!(
+                "warning: {n} corrupt patch(es) skipped: for {} their parents were drawn instead; \
+                 {roots} were roots, whose parts of the model are missing",
+                n - roots
+            );
+        } else {
+            eprintln!("warning: {n} corrupt patch(es) skipped; their parents were drawn instead");
+        }
     }
+    if unavailable > 0 {
+        let what = format!(
+            "{unavailable} patch(es) could not be read (unavailable: the disk or the server \
+             did not deliver them; see the warnings above)"
+        );
+        if mode == Mode::Progressive {
+            eprintln!("warning: {what}; their parents were drawn instead");
+        } else {
+            bail!("{what}, so the frames are incomplete");
+        }
+    }
+    Ok(())
 }
 
 /// The cameras of a render: a path's frames or an orbit's, one at a time.

@@ -3,6 +3,8 @@
 //! `error:` and a non-zero exit within 10 s; and a FIFO in a served directory does not
 //! keep `tessera serve` from starting.
 
+mod common;
+
 use std::io::{BufRead, BufReader, Read};
 use std::net::TcpListener;
 use std::process::{Child, Command, ExitStatus, Stdio};
@@ -93,4 +95,115 @@ fn issue_29_serve_starts_beside_a_fifo() {
         err.contains("evil.tsr") && err.contains("not a regular file"),
         "{err}"
     );
+}
+
+/// Answers the first `answered` requests of a connection stream as a static file server
+/// of `bytes` would (single ranges, an ETag), then accepts and never answers: a server
+/// that goes silent after the client opened the model.
+fn serve_then_go_silent(bytes: Vec<u8>, answered: usize) -> std::net::SocketAddr {
+    use std::io::Write;
+    let l = TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = l.local_addr().unwrap();
+    std::thread::spawn(move || {
+        let mut served = 0;
+        let mut held = Vec::new();
+        for c in l.incoming().take(64) {
+            let Ok(mut c) = c else { continue };
+            let _ = c.set_read_timeout(Some(Duration::from_secs(30)));
+            loop {
+                // One request head.
+                let mut head = Vec::new();
+                let mut b = [0u8; 1];
+                while !head.ends_with(b"\r\n\r\n") {
+                    match c.read(&mut b) {
+                        Ok(1) => head.push(b[0]),
+                        _ => break,
+                    }
+                }
+                if !head.ends_with(b"\r\n\r\n") {
+                    break;
+                }
+                if served >= answered {
+                    held.push(c);
+                    break;
+                }
+                served += 1;
+                let text = String::from_utf8_lossy(&head).to_ascii_lowercase();
+                let (a, z) = text
+                    .lines()
+                    .find_map(|l| l.strip_prefix("range: bytes="))
+                    .and_then(|r| {
+                        let (a, z) = r.trim().split_once('-')?;
+                        let a: usize = a.parse().ok()?;
+                        let z: usize = z.parse().unwrap_or(bytes.len() - 1);
+                        Some((a, z.min(bytes.len() - 1)))
+                    })
+                    .unwrap_or((0, bytes.len() - 1));
+                let body = &bytes[a..=z];
+                let reply = format!(
+                    "HTTP/1.1 206 Partial Content\r\nContent-Length: {}\r\n\
+                     Content-Range: bytes {a}-{z}/{}\r\nETag: \"m1\"\r\n\
+                     Accept-Ranges: bytes\r\n\r\n",
+                    body.len(),
+                    bytes.len()
+                );
+                if c.write_all(reply.as_bytes()).is_err() || c.write_all(body).is_err() {
+                    break;
+                }
+            }
+        }
+        std::thread::sleep(Duration::from_secs(60));
+    });
+    addr
+}
+
+/// Issue 29 item 6: `render --complete` against a server that goes silent once the model
+/// is open took 552 s, then exited 0 with coarse frames and called the missing patches
+/// "corrupt". Now it fails within seconds, non-zero, calling them unavailable.
+#[test]
+fn issue_29_render_complete_against_a_server_gone_silent_fails_and_says_why() {
+    let built = common::build_sphere(60_000, 3, false, &common::small_options());
+    let bytes = std::fs::read(&built.model_path).unwrap();
+    // The first request (64 KiB: header, index, roots of this model) is answered.
+    let addr = serve_then_go_silent(bytes, 1);
+    let out = tempfile::tempdir().unwrap();
+    let t = Instant::now();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_tessera"))
+        .args([
+            "render",
+            &format!("http://{addr}/m.tsr"),
+            "--orbit",
+            "1",
+            "--complete",
+            "--width",
+            "320",
+            "--height",
+            "240",
+            "--out",
+        ])
+        .arg(out.path())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let status = wait_within(&mut child, Duration::from_secs(120));
+    let took = t.elapsed();
+    let mut err = String::new();
+    child
+        .stderr
+        .take()
+        .unwrap()
+        .read_to_string(&mut err)
+        .unwrap();
+    eprintln!("{took:?}: {err}");
+    assert!(!status.success(), "exit 0 with incomplete frames: {err}");
+    assert!(
+        err.contains("could not be read") && err.contains("incomplete"),
+        "{err}"
+    );
+    assert!(
+        !err.contains("corrupt"),
+        "unavailable patches called corrupt: {err}"
+    );
+    assert!(took < Duration::from_secs(60), "{took:?}");
 }

@@ -754,6 +754,12 @@ impl Scheduler {
         self.retry.len()
     }
 
+    /// Whether `node` could not be read this time (network, I/O) and is asked for again
+    /// after a backoff, rather than failed for good.
+    pub fn is_retrying(&self, node: u32) -> bool {
+        self.retry.contains_key(&node)
+    }
+
     /// Reads the roots now (when the source can block) and uploads them, pinned: the
     /// first frame then shows the whole model at its coarsest level and nothing else is
     /// loaded before it. A root that fails is skipped (a hole, reported). Without
