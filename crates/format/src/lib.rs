@@ -25,6 +25,7 @@ pub mod fuzzing;
 mod grid;
 mod index;
 mod pages;
+pub mod ranges;
 #[cfg(feature = "mmap")]
 mod reader;
 mod records;

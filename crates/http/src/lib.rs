@@ -82,13 +82,10 @@ pub const UNAVAILABLE_COOLDOWN: Duration = Duration::from_secs(2);
 pub const MAX_REDIRECTS: u32 = 5;
 /// Most range requests of one [`HttpSource`] in flight at once.
 pub const MAX_IN_FLIGHT: usize = 3;
-/// Most patches one coalesced request of [`RemoteModel::decode_patches`] fetches.
-pub const COALESCE_MAX_PATCHES: usize = 16;
-/// Most bytes one coalesced request fetches (a single larger patch gets its own).
-pub const COALESCE_MAX_BYTES: u64 = 512 << 10;
-/// Unwanted bytes between two wanted patches that a coalesced request may carry (at
-/// 20 Mbit/s, 4 KiB cost under 2 ms; a round trip costs tens).
-pub const COALESCE_MAX_GAP: u64 = 4096;
+use tessera_format::ranges::{coalesce, parse_content_range};
+/// The coalescing rule of [`RemoteModel::decode_patches`]: every reader's
+/// (`tessera_format::ranges`).
+pub use tessera_format::ranges::{COALESCE_MAX_BYTES, COALESCE_MAX_GAP, COALESCE_MAX_PATCHES};
 /// Upper bound of one node's uncompressed index page bytes (`docs/format.md`; the
 /// reader's own bound in `tessera_format::pages`).
 const MAX_NODE_PAGE_BYTES: u64 = 128;
@@ -260,20 +257,6 @@ fn unavailable(m: impl Into<String>) -> HttpError {
 
 fn refused(m: impl Into<String>) -> HttpError {
     HttpError::new(ErrorClass::Refused, m)
-}
-
-/// `bytes A-B/TOTAL` (or `bytes */TOTAL`) of a `Content-Range` header; a span must have
-/// `A <= B < TOTAL` (RFC 9110 section 14.4).
-fn parse_content_range(v: &str) -> Option<(Option<(u64, u64)>, u64)> {
-    let rest = v.trim().strip_prefix("bytes")?.trim_start();
-    let (span, total) = rest.split_once('/')?;
-    let total: u64 = total.trim().parse().ok()?;
-    if span.trim() == "*" {
-        return Some((None, total));
-    }
-    let (a, b) = span.trim().split_once('-')?;
-    let (a, b): (u64, u64) = (a.parse().ok()?, b.parse().ok()?);
-    (a <= b && b < total).then_some((Some((a, b)), total))
 }
 
 /// What a `ureq` error means for the attempt that got it.
@@ -903,20 +886,10 @@ impl PatchReader for RemoteModel {
             }
         }
         ranges.sort_by_key(|(r, _)| (r.start, r.end));
-        let mut start = 0;
-        while start < ranges.len() {
-            let span_start = ranges[start].0.start;
-            let mut span_end = ranges[start].0.end;
-            let mut end = start + 1;
-            while end < ranges.len()
-                && end - start < COALESCE_MAX_PATCHES
-                && ranges[end].0.start <= span_end + COALESCE_MAX_GAP
-                && ranges[end].0.end.max(span_end) - span_start <= COALESCE_MAX_BYTES
-            {
-                span_end = span_end.max(ranges[end].0.end);
-                end += 1;
-            }
-            let run = &ranges[start..end];
+        let spans: Vec<Range<u64>> = ranges.iter().map(|(r, _)| r.clone()).collect();
+        for (span, members) in coalesce(&spans) {
+            let (span_start, span_end) = (span.start, span.end);
+            let run = &ranges[members];
             match self.source.read(span_start..span_end) {
                 Ok(bytes) => {
                     if !self.source.in_prefix(&(span_start..span_end)) {
@@ -942,7 +915,6 @@ impl PatchReader for RemoteModel {
                     }
                 }
             }
-            start = end;
         }
         out.into_iter()
             .map(|r| r.unwrap_or_else(|| Err(self.source.error(refused("patch not read")))))

@@ -54,10 +54,11 @@ use tessera_stream::{Answer, PatchSource};
 
 use crate::loader::{Shared, State};
 
-/// Most patches one loader read takes together (the top node and its neighbours).
-pub const BATCH_MAX_PATCHES: usize = 16;
-/// Most patch bytes one loader read takes together (the top node always).
-pub const BATCH_MAX_BYTES: u64 = 512 << 10;
+/// Most patches one loader read takes together (the top node and its neighbours): the
+/// coalescing rule of every reader (`tessera_format::ranges::Span`).
+pub const BATCH_MAX_PATCHES: usize = tessera_format::ranges::COALESCE_MAX_PATCHES;
+/// Most bytes one loader read spans (the top node always).
+pub const BATCH_MAX_BYTES: u64 = tessera_format::ranges::COALESCE_MAX_BYTES;
 
 /// Pager configuration.
 #[derive(Clone, Debug)]

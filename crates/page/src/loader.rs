@@ -13,7 +13,9 @@ use rustc_hash::{FxHashMap, FxHashSet};
 use tessera_format::{FormatError, PatchData, PatchReader};
 use tessera_stream::Answer;
 
-use crate::{PagerStats, BATCH_MAX_BYTES, BATCH_MAX_PATCHES};
+use tessera_format::ranges::Span;
+
+use crate::PagerStats;
 
 /// One queued request: larger priority first, then earlier in the request slice.
 #[derive(Debug)]
@@ -97,12 +99,10 @@ impl State {
         };
         let latest = model.latest_index();
         let index = latest.as_deref().unwrap_or(model.index());
-        let bytes = |n: u32| {
-            index
-                .patch_range(n as usize)
-                .map_or(u64::MAX, |r| r.end - r.start)
-        };
-        let mut total = bytes(first);
+        let range = |n: u32| index.patch_range(n as usize).ok();
+        // The first node always; its neighbours as far as every reader's coalescing
+        // rule allows (`Span`: patch count, gaps, bytes spanned).
+        let mut span = range(first).map(Span::new);
         let mut near: Vec<(u32, f32)> = Vec::new();
         // Alternately one step up and one down the table, while the next node is queued
         // and fits: (last node taken, step, still growing).
@@ -112,17 +112,17 @@ impl State {
             for e in ends.iter_mut().filter(|e| e.2) {
                 let n = e.0 + e.1;
                 e.2 = false;
-                if n < 0 || n >= count || near.len() + 1 >= BATCH_MAX_PATCHES {
+                if n < 0 || n >= count {
                     continue;
                 }
                 let n = n as u32;
-                let b = bytes(n);
-                if let Some(&p) = self.queued.get(&n) {
-                    if total.saturating_add(b) <= BATCH_MAX_BYTES {
-                        near.push((n, p));
-                        total += b;
-                        *e = (i64::from(n), e.1, true);
-                    }
+                let (Some(&p), Some(s), Some(r)) = (self.queued.get(&n), span.as_mut(), range(n))
+                else {
+                    continue;
+                };
+                if s.try_add(&r) {
+                    near.push((n, p));
+                    *e = (i64::from(n), e.1, true);
                 }
             }
         }

@@ -34,12 +34,11 @@ use tessera_stream::Answer;
 pub const PREFIX_BYTES: u64 = 64 << 10;
 /// Most range requests in flight at once (as `tessera_http::MAX_IN_FLIGHT`).
 pub const MAX_IN_FLIGHT: usize = 3;
-/// Most patches one coalesced request fetches.
-pub const COALESCE_MAX_PATCHES: usize = 16;
-/// Most bytes one coalesced request fetches (a single larger patch gets its own).
-pub const COALESCE_MAX_BYTES: u64 = 512 << 10;
-/// Unwanted bytes between two wanted patches that a coalesced request may carry.
-pub const COALESCE_MAX_GAP: u64 = 4096;
+/// The coalescing rule and the range headers: every reader's (`tessera_format::ranges`).
+pub use tessera_format::ranges::{
+    parse_content_range, range_header, Span, COALESCE_MAX_BYTES, COALESCE_MAX_GAP,
+    COALESCE_MAX_PATCHES,
+};
 
 /// A request in flight is cancelled once none of its patches was in this many wanted
 /// sets in a row ([`Fetcher::set_wanted`]; the scheduler gives one a frame): a few
@@ -47,26 +46,6 @@ pub const COALESCE_MAX_GAP: u64 = 4096;
 /// aborted and asked for again, while a view turned away stops fetching within ~70 ms
 /// at 60 fps.
 pub const CANCEL_AFTER_WANTS: u32 = 4;
-
-/// `bytes A-B/TOTAL` (or `bytes */TOTAL`) of a `Content-Range` header.
-pub fn parse_content_range(v: &str) -> Option<(Option<(u64, u64)>, u64)> {
-    let rest = v.trim().strip_prefix("bytes")?.trim_start();
-    let (span, total) = rest.split_once('/')?;
-    let total: u64 = total.trim().parse().ok()?;
-    if span.trim() == "*" {
-        return Some((None, total));
-    }
-    let (a, b) = span.trim().split_once('-')?;
-    Some((
-        Some((a.trim().parse().ok()?, b.trim().parse().ok()?)),
-        total,
-    ))
-}
-
-/// The `Range` header value for `range` (end exclusive, not empty).
-pub fn range_header(range: &Range<u64>) -> String {
-    format!("bytes={}-{}", range.start, range.end.saturating_sub(1))
-}
 
 /// Parts of a remote file fetched so far. See the module docs.
 pub struct SparseBytes {
@@ -474,43 +453,33 @@ impl Fetcher {
         let range_of = |n: u32| self.index.patch_range(n as usize).ok();
         let first = range_of(top)?;
         let (mut lo, mut hi) = (top, top);
-        let (mut start, mut end) = (first.start, first.end);
-        let mut count = 1;
+        let mut span = Span::new(first);
         let shown = self.index.nodes().len() as u32;
-        // Forward: wanted patches after this one, across small gaps.
+        // Forward: wanted patches after this one, across small gaps (the bytes of the
+        // unwanted ones between are the gaps).
         let mut j = hi + 1;
-        while j < shown && count < COALESCE_MAX_PATCHES {
+        while j < shown {
             let Some(r) = range_of(j) else { break };
-            if r.start.saturating_sub(end) > COALESCE_MAX_GAP || r.end - start > COALESCE_MAX_BYTES
-            {
-                break;
-            }
-            if self.busy.contains(&j) {
+            if !span.admits(&r) || self.busy.contains(&j) {
                 break;
             }
             if self.wanted.contains(&j) {
+                span.try_add(&r);
                 hi = j;
-                end = r.end;
-                count += 1;
             }
             j += 1;
         }
         // Backward, the same way.
         let mut j = lo;
-        while j > 0 && count < COALESCE_MAX_PATCHES {
+        while j > 0 {
             j -= 1;
             let Some(r) = range_of(j) else { break };
-            if start.saturating_sub(r.end) > COALESCE_MAX_GAP || end - r.start > COALESCE_MAX_BYTES
-            {
-                break;
-            }
-            if self.busy.contains(&j) {
+            if !span.admits(&r) || self.busy.contains(&j) {
                 break;
             }
             if self.wanted.contains(&j) {
+                span.try_add(&r);
                 lo = j;
-                start = r.start;
-                count += 1;
             }
         }
         let nodes: Vec<u32> = (lo..=hi).filter(|&n| self.wanted.contains(&n)).collect();
@@ -523,14 +492,14 @@ impl Fetcher {
             id,
             InFlight {
                 nodes: nodes.clone(),
-                range: start..end,
+                range: span.range.clone(),
                 unwanted: 0,
             },
         );
         self.stats.requests += 1;
         Some(Request {
             id,
-            range: start..end,
+            range: span.range,
             nodes,
         })
     }
@@ -691,21 +660,14 @@ impl PickReader {
         let range_of = |n: u32| self.index.patch_range(n as usize).ok();
         nodes.retain(|&n| range_of(n).is_some());
         nodes.sort_by_key(|&n| range_of(n).map(|r| r.start));
-        let mut out: Vec<(Range<u64>, Vec<u32>)> = Vec::new();
-        for n in nodes {
-            let r = range_of(n).expect("kept above");
-            match out.last_mut() {
-                Some((span, members))
-                    if r.start >= span.end
-                        && r.start - span.end <= COALESCE_MAX_GAP
-                        && r.end - span.start <= COALESCE_MAX_BYTES =>
-                {
-                    span.end = r.end;
-                    members.push(n);
-                }
-                _ => out.push((r, vec![n])),
-            }
-        }
+        let ranges: Vec<Range<u64>> = nodes
+            .iter()
+            .map(|&n| range_of(n).expect("kept above"))
+            .collect();
+        let out: Vec<(Range<u64>, Vec<u32>)> = tessera_format::ranges::coalesce(&ranges)
+            .into_iter()
+            .map(|(span, members)| (span, nodes[members].to_vec()))
+            .collect();
         if out.is_empty() {
             // Only nodes without a patch range were lacking: nothing more to fetch.
             return Ok(PickAttempt::Done(hit, stats));
