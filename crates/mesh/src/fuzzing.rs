@@ -146,7 +146,7 @@ pub fn fuzz_ply(data: &[u8]) -> Result<ImportReport, MeshError> {
 /// The OBJ target: the bytes as a `.obj` file.
 pub fn fuzz_obj(data: &[u8]) -> Result<ImportReport, MeshError> {
     let mut v = CheckingVisitor::default();
-    let r = crate::obj::read_obj_from(Path::new(FUZZ_PATH), || Ok(data), &mut v);
+    let r = crate::obj::read_obj_from(Path::new(FUZZ_PATH), None, || Ok(data), &mut v);
     check(r, &v)
 }
 
