@@ -897,6 +897,16 @@ fn finalize(
         page_nodes: opts.index_page_nodes,
         ..bytemuck::Zeroable::zeroed()
     };
+    // Every triangle degenerate (coincident vertices, zero areas, corners on one grid
+    // point): an empty model is no model (issue 29, item 7). Refused before anything is
+    // written, so nothing is left at the output.
+    if report.stored_triangles == 0 {
+        return Err(BuildError::AllDegenerate {
+            triangles: ctx.imp.face_count,
+            bits: grid.bits,
+            finer_bits: report.quant_bits_to_keep_all.filter(|&b| b > grid.bits),
+        });
+    }
     match write_model_until(output, &header, &records, &patches, &ctx.out, &|| {
         progress.cancelled()
     }) {
