@@ -901,10 +901,16 @@ fn finalize(
     // point): an empty model is no model (issue 29, item 7). Refused before anything is
     // written, so nothing is left at the output.
     if report.stored_triangles == 0 {
+        let finer = report.quant_bits_to_keep_all.filter(|&b| b > grid.bits);
         return Err(BuildError::AllDegenerate {
             triangles: ctx.imp.face_count,
-            bits: grid.bits,
-            finer_bits: report.quant_bits_to_keep_all.filter(|&b| b > grid.bits),
+            why: format!(
+                "two corners on one point of the {}-bit quantisation grid{}",
+                grid.bits,
+                finer.map_or(String::new(), |b| format!(
+                    "; some have an area in the input: --quant-bits {b} keeps them"
+                ))
+            ),
         });
     }
     match write_model_until(output, &header, &records, &patches, &ctx.out, &|| {

@@ -75,7 +75,7 @@ pub struct BuildOptions {
     pub texture: texture::TextureOptions,
     /// Where the files the input names (glTF buffers and images, MTL libraries and
     /// textures) may be read from: `None` (the default), only regular files under the
-    /// input's folder; else under this folder (`--asset-root`).
+    /// input's folder; else under it or under this folder (`--asset-root`).
     pub asset_root: Option<PathBuf>,
     /// Most triangles the input may have, checked against what its header declares
     /// before anything is spooled, and as triangles arrive (`--max-input-triangles`;
@@ -134,21 +134,12 @@ pub enum BuildError {
     #[error("{}: the mesh has no triangles", .0.display())]
     EmptyInput(PathBuf),
     /// Every input triangle was removed as degenerate (zero area in the input, or its
-    /// corners on one grid point): the model would be empty.
+    /// corners on one grid point): the model would be empty. `why` says how.
     #[error(
-        "every one of the {triangles} input triangles is degenerate (two corners on one point \
-         of the {bits}-bit quantisation grid): the model would be empty{}",
-        match finer_bits {
-            Some(b) => format!("; some have an area in the input: --quant-bits {b} keeps them"),
-            None => String::new(),
-        }
+        "every one of the {triangles} input triangles is degenerate ({why}): the model would \
+         be empty"
     )]
-    AllDegenerate {
-        triangles: u64,
-        bits: u32,
-        /// Bits of a grid that keeps the triangles with an area in the input, if any.
-        finer_bits: Option<u32>,
-    },
+    AllDegenerate { triangles: u64, why: String },
     #[error(transparent)]
     Format(#[from] FormatError),
     #[error("invalid option: {0}")]
@@ -444,6 +435,18 @@ fn build_in_pool(
     let mut imported = import::import(input, tmp.path(), &limits, progress)?;
     if opts.ignore_colors {
         imported.attributes.colors = false;
+    }
+    // Every vertex at one point: every triangle is degenerate, known now. Refused before
+    // the partition, which cannot split such an input and would load it as one leaf
+    // (3 x 10^7 coincident vertices took 1.1-1.4 GB with --memory 64M; issue 29).
+    if imported.bounds.min == imported.bounds.max {
+        return Err(BuildError::AllDegenerate {
+            triangles: imported.face_count,
+            why: format!(
+                "all {} vertices lie at one point, {:?}",
+                imported.vertex_count, imported.bounds.min
+            ),
+        });
     }
     if imported.attributes.textures && !opts.ignore_textures {
         texture::check_decode_memory(&imported.report.textures, opts.memory_bytes)?;

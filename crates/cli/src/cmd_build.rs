@@ -50,10 +50,10 @@ pub struct Args {
     /// Ignore the input's textures (faces in their material's colour).
     #[arg(long)]
     ignore_textures: bool,
-    /// Folder under which the files the input names (glTF buffers and images, OBJ
-    /// material libraries and their textures) may be read. Default: the input's own
-    /// folder; a reference outside it (`../x.bin`, an absolute path, a symlink out) is
-    /// an error. Only regular files are ever read.
+    /// A folder under which the files the input names (glTF buffers and images, OBJ
+    /// material libraries and their textures) may be read, besides the input's own
+    /// folder (the only one by default): a reference outside both (`../x.bin`, an
+    /// absolute path, a symlink out) is an error. Only regular files are ever read.
     #[arg(long, value_name = "DIR")]
     asset_root: Option<PathBuf>,
     /// Most triangles the input may have, checked against its header before anything

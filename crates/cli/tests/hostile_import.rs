@@ -373,3 +373,46 @@ fn issue_29_a_texture_too_large_for_memory_is_refused_before_decoding() {
     );
     assert_eq!(r.code, Some(0), "{}", r.stderr);
 }
+
+#[test]
+fn issue_29_coincident_vertices_are_refused_before_the_partition() {
+    // Before: exit 0 with an empty model ("0 triangles stored"); at 3 x 10^7 vertices,
+    // 1.1-1.4 GB under --memory 64M, the one unsplittable leaf loaded whole.
+    let (_top, model) = layout();
+    let obj = "v 1 2 3\nv 1 2 3\nv 1 2 3\nv 1 2 3\nf 1 2 3\nf 2 3 4\n";
+    std::fs::write(model.join("same.obj"), obj).unwrap();
+    let line = build_fails(&model, "same.obj", &["--memory", "64M"], 30);
+    assert!(
+        line.contains("every one of the 2 input triangles is degenerate"),
+        "{line}"
+    );
+    assert!(line.contains("all 4 vertices lie at one point"), "{line}");
+}
+
+#[test]
+fn issue_29_instancing_is_counted_before_it_is_spooled() {
+    // Before: 20k nodes instancing one mesh spooled every instance (4 GB in 5 s for a
+    // 5k-triangle mesh) with nothing checked; the declared total now meets the limit.
+    let (_top, model) = layout();
+    use base64::Engine as _;
+    let data = base64::engine::general_purpose::STANDARD.encode(triangle_bin());
+    let nodes: Vec<String> = (0..20_000)
+        .map(|i| format!(r#"{{"mesh":0,"translation":[{i},0,0]}}"#))
+        .collect();
+    let roots: Vec<String> = (0..20_000).map(|i| i.to_string()).collect();
+    let doc = format!(
+        r#"{{"asset":{{"version":"2.0"}},"buffers":[{{"uri":"data:;base64,{data}","byteLength":36}}],
+"bufferViews":[{{"buffer":0,"byteLength":36}}],
+"accessors":[{{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}}],
+"meshes":[{{"primitives":[{{"attributes":{{"POSITION":0}}}}]}}],
+"nodes":[{}],"scenes":[{{"nodes":[{}]}}],"scene":0}}"#,
+        nodes.join(","),
+        roots.join(",")
+    );
+    std::fs::write(model.join("inst.gltf"), doc).unwrap();
+    let line = build_fails(&model, "inst.gltf", &["--max-input-triangles", "10000"], 10);
+    assert!(
+        line.contains("declares 20000 triangles, more than --max-input-triangles 10000"),
+        "{line}"
+    );
+}

@@ -10,8 +10,8 @@
 //! 1. The name (percent-decoded by the caller where it is a URI) is joined to the
 //!    folder of the file that names it and canonicalised (symlinks resolved, `..`
 //!    removed).
-//! 2. The result must lie under the *allowed root*: the canonical folder of the input,
-//!    or the folder [`AssetPolicy::root`] gives (`tessera build --asset-root DIR`).
+//! 2. The result must lie under an *allowed root*: the canonical folder of the input,
+//!    or the folder [`AssetPolicy::root`] adds (`tessera build --asset-root DIR`).
 //!    Otherwise the reference is refused with an error naming it and the flag.
 //! 3. It must be a regular file: a FIFO would block `open` forever, `/dev/zero` never
 //!    ends, a directory or a socket is no asset. Checked with a `stat` before anything
@@ -30,7 +30,8 @@ use crate::MeshError;
 /// Where referenced files may be read from (see the module docs).
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct AssetPolicy {
-    /// The allowed root; `None` (the default): the input's own folder.
+    /// A folder allowed besides the input's own (`None`, the default: only the
+    /// input's folder).
     pub root: Option<PathBuf>,
 }
 
@@ -40,8 +41,7 @@ impl AssetPolicy {
         AssetPolicy { root: None }
     }
 
-    /// Files under `root` (which should contain the input's folder: the input's own
-    /// references are not otherwise allowed).
+    /// Files under `root` as well as under the input's folder.
     pub fn under(root: impl Into<PathBuf>) -> AssetPolicy {
         AssetPolicy {
             root: Some(root.into()),
@@ -80,43 +80,45 @@ impl std::fmt::Display for AssetError {
     }
 }
 
-/// The policy applied to one input: its allowed root, canonical.
+/// The policy applied to one input: its allowed roots, canonical.
 #[derive(Clone, Debug)]
 pub(crate) struct Assets {
-    root: PathBuf,
-    /// The root came from [`AssetPolicy::root`] (`--asset-root`), not the input.
-    widened: bool,
+    /// The input's folder.
+    folder: PathBuf,
+    /// [`AssetPolicy::root`] (`--asset-root`).
+    root: Option<PathBuf>,
 }
 
 impl Assets {
     /// The policy for the input at `input`.
     pub(crate) fn for_input(policy: &AssetPolicy, input: &Path) -> Result<Assets, MeshError> {
-        let (root, widened) = match &policy.root {
-            Some(r) => (r.clone(), true),
-            None => (folder_of(input).to_path_buf(), false),
+        let canonical = |dir: &Path, what: &str| {
+            let c = std::fs::canonicalize(dir).map_err(|e| {
+                MeshError::io(
+                    dir,
+                    std::io::Error::new(e.kind(), format!("{what} cannot be resolved ({e})")),
+                )
+            })?;
+            match c.is_dir() {
+                true => Ok(c),
+                false => Err(MeshError::Usage {
+                    path: dir.to_path_buf(),
+                    detail: format!("{what} is not a directory"),
+                }),
+            }
         };
-        let canonical = std::fs::canonicalize(&root).map_err(|e| {
-            MeshError::io(
-                &root,
-                std::io::Error::new(e.kind(), format!("the asset root cannot be resolved ({e})")),
-            )
-        })?;
-        if !canonical.is_dir() {
-            return Err(MeshError::Usage {
-                path: root,
-                detail: "the asset root is not a directory".into(),
-            });
-        }
         Ok(Assets {
-            root: canonical,
-            widened,
+            folder: canonical(folder_of(input), "the input's folder")?,
+            root: match &policy.root {
+                Some(r) => Some(canonical(r, "the asset root (--asset-root)")?),
+                None => None,
+            },
         })
     }
 
-    /// The allowed root (canonical).
-    #[cfg(test)]
-    pub(crate) fn root(&self) -> &Path {
-        &self.root
+    /// Whether the canonical `path` lies under an allowed root.
+    fn allows(&self, path: &Path) -> bool {
+        path.starts_with(&self.folder) || self.root.as_ref().is_some_and(|r| path.starts_with(r))
     }
 
     /// Where `name` (as the input writes it, percent-decoded), named by a file in
@@ -138,7 +140,7 @@ impl Assets {
                 let lexical = std::fs::canonicalize(base_dir)
                     .map(|b| lexical_join(&b, name))
                     .unwrap_or_else(|_| joined.clone());
-                if !lexical.starts_with(&self.root) {
+                if !self.allows(&lexical) {
                     return Err(self.outside(&lexical, what));
                 }
                 return Err(AssetError::Missing {
@@ -147,7 +149,7 @@ impl Assets {
                 });
             }
         };
-        if !resolved.starts_with(&self.root) {
+        if !self.allows(&resolved) {
             return Err(self.outside(&resolved, what));
         }
         let meta = std::fs::metadata(&resolved).map_err(|cause| AssetError::Missing {
@@ -161,20 +163,20 @@ impl Assets {
     }
 
     fn outside(&self, resolved: &Path, what: &str) -> AssetError {
-        AssetError::Refused(if self.widened {
-            format!(
-                "{what} resolves to {}, outside the asset root {} (--asset-root): \
-                 pass a --asset-root DIR that contains it to allow it",
+        AssetError::Refused(match &self.root {
+            Some(root) => format!(
+                "{what} resolves to {}, outside the input's folder {} and the asset root {} \
+                 (--asset-root): pass a --asset-root DIR that contains it to allow it",
                 resolved.display(),
-                self.root.display()
-            )
-        } else {
-            format!(
+                self.folder.display(),
+                root.display()
+            ),
+            None => format!(
                 "{what} resolves to {}, outside the input's folder {} (the allowed \
                  root): pass --asset-root DIR to allow it",
                 resolved.display(),
-                self.root.display()
-            )
+                self.folder.display()
+            ),
         })
     }
 }
@@ -309,7 +311,14 @@ mod tests {
         // Widened: the parent folder is allowed.
         let wide = Assets::for_input(&AssetPolicy::under(top.path()), &dir.join("m.gltf")).unwrap();
         assert!(wide.resolve(&dir, "../secret.bin", "image").is_ok());
-        assert_eq!(wide.root(), std::fs::canonicalize(top.path()).unwrap());
+        assert!(wide.resolve(&dir, "tex/a.png", "image").is_ok());
+        // A root elsewhere adds to the input's folder, it does not replace it.
+        let other = tempfile::tempdir().unwrap();
+        let beside =
+            Assets::for_input(&AssetPolicy::under(other.path()), &dir.join("m.gltf")).unwrap();
+        assert!(beside.resolve(&dir, "tex/a.png", "image").is_ok());
+        let m = refused(beside.resolve(&dir, "../secret.bin", "image"));
+        assert!(m.contains("and the asset root"), "{m}");
     }
 
     #[cfg(unix)]
