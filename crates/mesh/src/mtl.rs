@@ -186,7 +186,12 @@ impl Library {
     /// Parse the library `file` (its text), its `map_Kd` images resolved under `assets`
     /// (`None`: joined to its folder, unchecked, for tests); a refused image is an
     /// error (the message).
-    fn parse(&mut self, file: &Path, text: &str, assets: Option<&Assets>) -> Result<(), String> {
+    pub(crate) fn parse(
+        &mut self,
+        file: &Path,
+        text: &str,
+        assets: Option<&Assets>,
+    ) -> Result<(), String> {
         let dir = file.parent().unwrap_or(Path::new("."));
         let mut current: Option<String> = None;
         for line in text.lines() {
