@@ -953,6 +953,7 @@ fn finalize(
     if report.stored_triangles == 0 {
         let finer = report.quant_bits_to_keep_all.filter(|&b| b > grid.bits);
         return Err(BuildError::AllDegenerate {
+            input: ctx.imp.input.clone(),
             triangles: ctx.imp.face_count,
             why: format!(
                 "two corners on one point of the {}-bit quantisation grid{}",

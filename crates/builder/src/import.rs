@@ -36,6 +36,8 @@ pub struct Aabb {
 
 /// What stage 1 leaves behind.
 pub struct Imported {
+    /// The input file (for messages).
+    pub input: std::path::PathBuf,
     pub vertices: VertexStore,
     pub faces_path: std::path::PathBuf,
     pub face_count: u64,
@@ -208,6 +210,8 @@ fn check_declared(
 }
 
 struct Sink<'a> {
+    /// The input, named in the limits' messages.
+    input: &'a Path,
     limits: &'a ImportLimits,
     tmp: &'a Path,
     vertices: BufWriter<File>,
@@ -225,7 +229,10 @@ impl MeshVisitor for Sink<'_> {
         // Before anything is spooled: a 269-byte glTF may declare 3 x 10^9 vertices, and
         // 20k instances of one mesh 10^8 triangles (issue 29, item 3).
         if let Some(why) = check_declared(header, self.limits, self.tmp, free_bytes(self.tmp)) {
-            return Err(MeshError::Visitor(why));
+            return Err(MeshError::Visitor(format!(
+                "{}: {why}",
+                self.input.display()
+            )));
         }
         self.attributes = header.attributes;
         if let Some(n) = header.face_count {
@@ -279,8 +286,9 @@ impl MeshVisitor for Sink<'_> {
         // as they arrive.
         if self.face_count > self.limits.max_input_triangles {
             return Err(MeshError::Visitor(format!(
-                "the input has more than {} triangles, the most --max-input-triangles allows \
-                 (raise it if the input is what you meant to build)",
+                "{}: the input has more than {} triangles, the most --max-input-triangles \
+                 allows (raise it if the input is what you meant to build)",
+                self.input.display(),
                 self.limits.max_input_triangles
             )));
         }
@@ -307,6 +315,7 @@ pub fn import(
     let fpath = tmp.join("faces.bin");
     let create = |p: &Path| File::create(p).map_err(|e| BuildError::io(p, e));
     let mut sink = Sink {
+        input,
         limits,
         tmp,
         vertices: BufWriter::with_capacity(1 << 20, create(&vpath)?),
@@ -360,6 +369,7 @@ pub fn import(
         ..attributes
     };
     Ok(Imported {
+        input: input.to_path_buf(),
         vertices: VertexStore::open(&vpath)?,
         faces_path: fpath,
         face_count,

@@ -136,10 +136,19 @@ pub enum BuildError {
     /// Every input triangle was removed as degenerate (zero area in the input, or its
     /// corners on one grid point): the model would be empty. `why` says how.
     #[error(
-        "every one of the {triangles} input triangles is degenerate ({why}): the model would \
-         be empty"
+        "{}: every one of the {triangles} input triangles is degenerate ({why}): the model \
+         would be empty",
+        input.display()
     )]
-    AllDegenerate { triangles: u64, why: String },
+    AllDegenerate {
+        input: PathBuf,
+        triangles: u64,
+        why: String,
+    },
+    /// The input is within the format's limits but beyond what the options allow (a
+    /// texture too large to decode within `--memory`); `detail` says what to change.
+    #[error("{}: {detail}", input.display())]
+    Limit { input: PathBuf, detail: String },
     #[error(transparent)]
     Format(#[from] FormatError),
     #[error("invalid option: {0}")]
@@ -441,6 +450,7 @@ fn build_in_pool(
     // (3 x 10^7 coincident vertices took 1.1-1.4 GB with --memory 64M; issue 29).
     if imported.bounds.min == imported.bounds.max {
         return Err(BuildError::AllDegenerate {
+            input: input.to_path_buf(),
             triangles: imported.face_count,
             why: format!(
                 "all {} vertices lie at one point, {:?}",
@@ -449,7 +459,12 @@ fn build_in_pool(
         });
     }
     if imported.attributes.textures && !opts.ignore_textures {
-        texture::check_decode_memory(&imported.report.textures, opts.memory_bytes)?;
+        texture::check_decode_memory(&imported.report.textures, opts.memory_bytes).map_err(
+            |detail| BuildError::Limit {
+                input: input.to_path_buf(),
+                detail,
+            },
+        )?;
     }
     check()?;
     report.input_vertices = imported.vertex_count;

@@ -1238,13 +1238,13 @@ fn encode_bc7(width: u32, height: u32, rgba: &[u8]) -> Result<PatchTexture, Buil
 /// `memory_bytes` (`--memory`) allows: about [`DECODE_BYTES_PER_TEXEL`] bytes a texel
 /// (its size is read from its header at import). A small PNG may claim 11000 x 11000
 /// texels (968 MB to decode); an image larger than the stage's share of the budget
-/// decodes alone, so the whole budget is the bound.
-pub fn check_decode_memory(sources: &[TextureSource], memory_bytes: u64) -> Result<(), BuildError> {
+/// decodes alone, so the whole budget is the bound. The error is the message.
+pub fn check_decode_memory(sources: &[TextureSource], memory_bytes: u64) -> Result<(), String> {
     for src in sources {
         let [w, h] = src.size;
         let need = u64::from(w) * u64::from(h) * DECODE_BYTES_PER_TEXEL;
         if need > memory_bytes {
-            return Err(BuildError::Options(format!(
+            return Err(format!(
                 "texture image '{}' is {w} x {h} texels: decoding it needs about {} MiB \
                  ({DECODE_BYTES_PER_TEXEL} bytes a texel), more than --memory {} MiB allows; \
                  raise --memory to at least {} MiB, or build with --ignore-textures",
@@ -1252,7 +1252,7 @@ pub fn check_decode_memory(sources: &[TextureSource], memory_bytes: u64) -> Resu
                 need >> 20,
                 memory_bytes >> 20,
                 need.div_ceil(1 << 20)
-            )));
+            ));
         }
     }
     Ok(())
@@ -1365,7 +1365,7 @@ mod tests {
             size: [w, h],
         };
         let e = check_decode_memory(&[t(11000, 11000)], 256 << 20).unwrap_err();
-        assert!(e.to_string().contains("more than --memory 256 MiB"), "{e}");
+        assert!(e.contains("more than --memory 256 MiB"), "{e}");
         check_decode_memory(&[t(4096, 4096)], 256 << 20).unwrap();
     }
 

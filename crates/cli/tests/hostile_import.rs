@@ -73,8 +73,8 @@ fn tessera_in(dir: &Path, args: &[&str], deadline_s: u64, signal_after: Option<f
 }
 
 /// `tessera build INPUT -o OUT EXTRA...` in `dir`, which must fail: one `error:` line
-/// (returned), no panic, non-zero exit, nothing at OUT, no temporary leftovers, within
-/// `deadline_s` and 256 MiB.
+/// naming the input (returned), no panic, non-zero exit, nothing at OUT, no temporary
+/// leftovers, within `deadline_s` and 256 MiB.
 fn build_fails(dir: &Path, input: &str, extra: &[&str], deadline_s: u64) -> String {
     let mut args = vec!["build", input, "-o", "out.tsr", "-q"];
     args.extend_from_slice(extra);
@@ -115,6 +115,8 @@ fn build_fails(dir: &Path, input: &str, extra: &[&str], deadline_s: u64) -> Stri
         "{input}: want one error line:\n{}",
         r.stderr
     );
+    let named = format!("{input}: ");
+    assert!(lines[0].contains(&named), "does not name {input}: {}", lines[0]);
     lines[0].to_string()
 }
 
