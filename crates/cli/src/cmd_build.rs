@@ -84,6 +84,13 @@ pub struct Args {
 }
 
 pub fn run(a: Args) -> anyhow::Result<ExitCode> {
+    if let Some(root) = &a.asset_root {
+        anyhow::ensure!(
+            root.is_dir(),
+            "--asset-root {}: no such directory",
+            root.display()
+        );
+    }
     let opts = BuildOptions {
         memory_bytes: a.memory,
         threads: a.threads,

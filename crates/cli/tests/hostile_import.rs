@@ -116,7 +116,11 @@ fn build_fails(dir: &Path, input: &str, extra: &[&str], deadline_s: u64) -> Stri
         r.stderr
     );
     let named = format!("{input}: ");
-    assert!(lines[0].contains(&named), "does not name {input}: {}", lines[0]);
+    assert!(
+        lines[0].contains(&named),
+        "does not name {input}: {}",
+        lines[0]
+    );
     lines[0].to_string()
 }
 
@@ -173,6 +177,25 @@ fn issue_29_a_buffer_outside_the_input_folder_is_an_error_unless_asset_root_allo
     let line = build_fails(&model, "m.gltf", &[], 10);
     assert!(line.contains("glTF buffer 0 URI '../secret.bin'"), "{line}");
     assert!(line.contains("--asset-root DIR"), "{line}");
+    let r = tessera_in(
+        &model,
+        &[
+            "build",
+            "m.gltf",
+            "-o",
+            "out.tsr",
+            "--asset-root",
+            "nowhere",
+        ],
+        10,
+        None,
+    );
+    assert_eq!(r.code, Some(1));
+    assert!(
+        r.stderr.contains("--asset-root nowhere: no such directory"),
+        "{}",
+        r.stderr
+    );
     let root = top.path().to_str().unwrap();
     let r = tessera_in(
         &model,
