@@ -177,29 +177,8 @@ fn issue_29_a_buffer_outside_the_input_folder_is_an_error_unless_asset_root_allo
     let line = build_fails(&model, "m.gltf", &[], 10);
     assert!(line.contains("glTF buffer 0 URI '../secret.bin'"), "{line}");
     assert!(line.contains("--asset-root DIR"), "{line}");
-    let r = tessera_in(
-        &model,
-        &[
-            "build",
-            "m.gltf",
-            "-o",
-            "out.tsr",
-            "--asset-root",
-            "nowhere",
-        ],
-        10,
-        None,
-    );
-    assert_eq!(r.code, Some(1));
-    assert!(
-        r.stderr.contains("--asset-root nowhere: no such directory"),
-        "{}",
-        r.stderr
-    );
-    let root = top.path().to_str().unwrap();
-    let r = tessera_in(
-        &model,
-        &[
+    let with_root = |root: &str| {
+        let args = [
             "build",
             "m.gltf",
             "-o",
@@ -207,10 +186,17 @@ fn issue_29_a_buffer_outside_the_input_folder_is_an_error_unless_asset_root_allo
             "-q",
             "--asset-root",
             root,
-        ],
-        60,
-        None,
+        ];
+        tessera_in(&model, &args, 60, None)
+    };
+    let r = with_root("nowhere");
+    assert_eq!(r.code, Some(1));
+    assert!(
+        r.stderr.contains("--asset-root nowhere: no such directory"),
+        "{}",
+        r.stderr
     );
+    let r = with_root(top.path().to_str().unwrap());
     assert_eq!(r.code, Some(0), "{}", r.stderr);
 }
 
