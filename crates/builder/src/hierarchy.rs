@@ -76,6 +76,8 @@ struct Ctx<'a> {
     /// Centre of the input's bounding box, local frame.
     box_center: [f64; 3],
     repaired: AtomicU64,
+    /// Most faces of an ordinary leaf (`--leaf-triangles`): more is an oversized leaf.
+    leaf_cap: u32,
     attributes: u32,
     cfg: SimplifyConfig,
     step: f64,
@@ -183,10 +185,57 @@ impl Ctx<'_> {
         area
     }
 
+    /// The faces of an oversized leaf without those whose corners share a grid point,
+    /// read and tested a chunk at a time (counted as `degenerate`, and `collapsed` when
+    /// they have an area in the input, as [`Ctx::load_leaf`] counts them).
+    ///
+    /// Why: a leaf is over the limit when its faces crowd a cell the partition cannot
+    /// split, mostly because their vertices coincide (issue 29: 3 x 10^7 coincident
+    /// vertices and one elsewhere made one leaf of 10^7 faces, whose weld tables took
+    /// 1.3 GB under `--memory 64M` and aborted). Its degenerate faces would be removed
+    /// after the weld; removed first, they cost one chunk. Ordinary leaves (at most
+    /// `leaf_triangles` faces) skip this pass: it would only add a grid lookup per face.
+    fn oversized_leaf_faces(&self, leaf: &Leaf) -> Result<Vec<[u32; 3]>, BuildError> {
+        const CHUNK: u64 = 1 << 16;
+        let qs = &self.part.quantized;
+        let mut kept = Vec::new();
+        let (mut degenerate, mut collapsed) = (0u64, 0u64);
+        let mut at = 0u64;
+        while at < leaf.face_count {
+            let n = CHUNK.min(leaf.face_count - at);
+            let part = Leaf {
+                id: leaf.id,
+                first_face: leaf.first_face + at,
+                face_count: n,
+            };
+            for f in read_leaf_faces(&self.buckets, &self.part.buckets, &part)? {
+                let q = f.map(|i| qs.get(i));
+                if q[0] == q[1] || q[1] == q[2] || q[0] == q[2] {
+                    degenerate += 1;
+                    collapsed += u64::from(self.has_area_in_input(f));
+                } else {
+                    kept.push(f);
+                }
+            }
+            at += n;
+            // The stores are memory-mapped: this pass may touch all of them.
+            if (at / CHUNK).is_multiple_of(16) {
+                self.release();
+            }
+        }
+        self.degenerate.fetch_add(degenerate, Ordering::Relaxed);
+        self.collapsed.fetch_add(collapsed, Ordering::Relaxed);
+        Ok(kept)
+    }
+
     /// A leaf's patch from its bucket: weld, clean, optimise.
     fn load_leaf(&self, leaf: &Leaf) -> Result<WorkPatch, BuildError> {
         let mut lap = self.phases.lap();
-        let faces = read_leaf_faces(&self.buckets, &self.part.buckets, leaf)?;
+        let faces = if leaf.face_count > u64::from(self.leaf_cap) {
+            self.oversized_leaf_faces(leaf)?
+        } else {
+            read_leaf_faces(&self.buckets, &self.part.buckets, leaf)?
+        };
         let mut local: FxHashMap<u32, u32> =
             FxHashMap::with_capacity_and_hasher(faces.len(), Default::default());
         let mut w = Welder::with_capacity(faces.len());
@@ -707,6 +756,7 @@ pub(crate) fn build_hierarchy(
             0.5 * (imp.bounds.min[i] + imp.bounds.max[i]) - part.grid.origin[i]
         }),
         repaired: AtomicU64::new(0),
+        leaf_cap: opts.leaf_triangles,
         attributes,
         cfg: SimplifyConfig {
             node_triangles: opts.node_triangles as usize,
@@ -897,6 +947,23 @@ fn finalize(
         page_nodes: opts.index_page_nodes,
         ..bytemuck::Zeroable::zeroed()
     };
+    // Every triangle degenerate (coincident vertices, zero areas, corners on one grid
+    // point): an empty model is no model (issue 29, item 7). Refused before anything is
+    // written, so nothing is left at the output.
+    if report.stored_triangles == 0 {
+        let finer = report.quant_bits_to_keep_all.filter(|&b| b > grid.bits);
+        return Err(BuildError::AllDegenerate {
+            input: ctx.imp.input.clone(),
+            triangles: ctx.imp.face_count,
+            why: format!(
+                "two corners on one point of the {}-bit quantisation grid{}",
+                grid.bits,
+                finer.map_or(String::new(), |b| format!(
+                    "; some have an area in the input: --quant-bits {b} keeps them"
+                ))
+            ),
+        });
+    }
     match write_model_until(output, &header, &records, &patches, &ctx.out, &|| {
         progress.cancelled()
     }) {

@@ -11,7 +11,9 @@ use std::fs::File;
 use std::io::{BufReader, BufWriter, Read, Write};
 use std::path::Path;
 use std::time::Instant;
-use tessera_mesh::{Attributes, ImportReport, MeshError, MeshHeader, MeshVisitor, Vertex};
+use tessera_mesh::{
+    AssetPolicy, Attributes, ImportReport, MeshError, MeshHeader, MeshVisitor, ReadOptions, Vertex,
+};
 
 /// A vertex as stored in the temporary vertex store. 40 bytes.
 #[repr(C)]
@@ -34,6 +36,8 @@ pub struct Aabb {
 
 /// What stage 1 leaves behind.
 pub struct Imported {
+    /// The input file (for messages).
+    pub input: std::path::PathBuf,
     pub vertices: VertexStore,
     pub faces_path: std::path::PathBuf,
     pub face_count: u64,
@@ -122,7 +126,94 @@ impl<T: Pod> RecordStore<T> {
     }
 }
 
+/// What the import may read and how much it may spool (the parts of
+/// [`crate::BuildOptions`] stage 1 needs).
+#[derive(Clone, Debug)]
+pub struct ImportLimits {
+    /// Which files the input may name (glTF buffers and images, MTL libraries and
+    /// textures): by default regular files under the input's folder.
+    pub assets: AssetPolicy,
+    /// Most triangles the input may have ([`crate::DEFAULT_MAX_INPUT_TRIANGLES`]).
+    pub max_input_triangles: u64,
+}
+
+impl Default for ImportLimits {
+    fn default() -> Self {
+        ImportLimits {
+            assets: AssetPolicy::default(),
+            max_input_triangles: crate::DEFAULT_MAX_INPUT_TRIANGLES,
+        }
+    }
+}
+
+/// Bytes the import spools per vertex (a [`StoredVertex`]) and per triangle.
+const SPOOL_VERTEX_BYTES: u64 = std::mem::size_of::<StoredVertex>() as u64;
+const SPOOL_TRIANGLE_BYTES: u64 = 12;
+
+/// Vertices between two polls of [`Progress::cancelled`] (the triangle sink and the
+/// importers poll their own loops): 65536 vertices are 2.5 MiB of spool, a few ms.
+const POLL_VERTICES: u64 = 1 << 16;
+
+/// Free bytes for an unprivileged writer on the file system holding `dir` (`None` when
+/// it cannot be told: not Unix, or `statvfs` fails).
+pub fn free_bytes(dir: &Path) -> Option<u64> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::ffi::OsStrExt;
+        let c = std::ffi::CString::new(dir.as_os_str().as_bytes()).ok()?;
+        let mut st: libc::statvfs = unsafe { std::mem::zeroed() };
+        // SAFETY: `c` is NUL-terminated, `st` a valid out-parameter.
+        if unsafe { libc::statvfs(c.as_ptr(), &mut st) } != 0 {
+            return None;
+        }
+        Some((st.f_bavail as u64).saturating_mul(st.f_frsize as u64))
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = dir;
+        None
+    }
+}
+
+/// The refusal of an input whose declared size will not fit: more triangles than
+/// `limits` allow, or an import spool larger than the free space of `tmp` (`free`).
+/// `None` when it fits (or nothing is declared).
+fn check_declared(
+    header: &MeshHeader,
+    limits: &ImportLimits,
+    tmp: &Path,
+    free: Option<u64>,
+) -> Option<String> {
+    let faces = header.face_count.unwrap_or(0);
+    if faces > limits.max_input_triangles {
+        return Some(format!(
+            "the input declares {faces} triangles, more than --max-input-triangles {} allows \
+             (raise it if the input is what you meant to build)",
+            limits.max_input_triangles
+        ));
+    }
+    let vertices = header.vertex_count.unwrap_or(0);
+    let spool = vertices
+        .saturating_mul(SPOOL_VERTEX_BYTES)
+        .saturating_add(faces.saturating_mul(SPOOL_TRIANGLE_BYTES));
+    match free {
+        Some(free) if spool > free => Some(format!(
+            "the input declares {vertices} vertices and {faces} triangles: importing them \
+             spools {:.1} GB to {}, which has {:.1} GB free (and the later stages need more); \
+             free space, or pass --tmp-dir on a larger disk",
+            spool as f64 / 1e9,
+            tmp.display(),
+            free as f64 / 1e9
+        )),
+        _ => None,
+    }
+}
+
 struct Sink<'a> {
+    /// The input, named in the limits' messages.
+    input: &'a Path,
+    limits: &'a ImportLimits,
+    tmp: &'a Path,
     vertices: BufWriter<File>,
     faces: BufWriter<File>,
     attributes: Attributes,
@@ -135,6 +226,14 @@ struct Sink<'a> {
 
 impl MeshVisitor for Sink<'_> {
     fn header(&mut self, header: &MeshHeader) -> Result<(), MeshError> {
+        // Before anything is spooled: a 269-byte glTF may declare 3 x 10^9 vertices, and
+        // 20k instances of one mesh 10^8 triangles (issue 29, item 3).
+        if let Some(why) = check_declared(header, self.limits, self.tmp, free_bytes(self.tmp)) {
+            return Err(MeshError::Visitor(format!(
+                "{}: {why}",
+                self.input.display()
+            )));
+        }
         self.attributes = header.attributes;
         if let Some(n) = header.face_count {
             self.progress.stage("import", n);
@@ -168,7 +267,14 @@ impl MeshVisitor for Sink<'_> {
             .write_all(bytemuck::bytes_of(&s))
             .map_err(|e| MeshError::Visitor(format!("{}: {e}", self.paths.0.display())))?;
         self.vertex_count += 1;
+        if self.vertex_count.is_multiple_of(POLL_VERTICES) && self.progress.cancelled() {
+            return Err(MeshError::Interrupted);
+        }
         Ok(())
+    }
+
+    fn cancelled(&self) -> bool {
+        self.progress.cancelled()
     }
 
     fn triangle(&mut self, idx: [u32; 3]) -> Result<(), MeshError> {
@@ -176,22 +282,42 @@ impl MeshVisitor for Sink<'_> {
             .write_all(bytemuck::bytes_of(&idx))
             .map_err(|e| MeshError::Visitor(format!("{}: {e}", self.paths.1.display())))?;
         self.face_count += 1;
+        // Inputs that do not declare their size (OBJ, ASCII STL) are held to the limit
+        // as they arrive.
+        if self.face_count > self.limits.max_input_triangles {
+            return Err(MeshError::Visitor(format!(
+                "{}: the input has more than {} triangles, the most --max-input-triangles \
+                 allows (raise it if the input is what you meant to build)",
+                self.input.display(),
+                self.limits.max_input_triangles
+            )));
+        }
         if self.face_count.is_multiple_of(1 << 20) {
             self.progress.advance(1 << 20);
             if self.progress.cancelled() {
-                return Err(MeshError::Visitor("interrupted".into()));
+                return Err(MeshError::Interrupted);
             }
         }
         Ok(())
     }
 }
 
-/// Stage 1. Temporary files go in `tmp`.
-pub fn import(input: &Path, tmp: &Path, progress: &dyn Progress) -> Result<Imported, BuildError> {
+/// Stage 1. Temporary files go in `tmp`; `limits` says which referenced files may be
+/// read and how large the input may be. Stops with [`BuildError::Interrupted`] when
+/// `progress` is cancelled.
+pub fn import(
+    input: &Path,
+    tmp: &Path,
+    limits: &ImportLimits,
+    progress: &dyn Progress,
+) -> Result<Imported, BuildError> {
     let vpath = tmp.join("vertices.bin");
     let fpath = tmp.join("faces.bin");
     let create = |p: &Path| File::create(p).map_err(|e| BuildError::io(p, e));
     let mut sink = Sink {
+        input,
+        limits,
+        tmp,
         vertices: BufWriter::with_capacity(1 << 20, create(&vpath)?),
         faces: BufWriter::with_capacity(1 << 20, create(&fpath)?),
         attributes: Attributes::default(),
@@ -206,7 +332,13 @@ pub fn import(input: &Path, tmp: &Path, progress: &dyn Progress) -> Result<Impor
     };
     progress.stage("import", 0);
     let parse_started = Instant::now();
-    let report = tessera_mesh::read_mesh(input, &mut sink).map_err(BuildError::Input)?;
+    let options = ReadOptions {
+        assets: limits.assets.clone(),
+    };
+    let report = tessera_mesh::read_mesh_with(input, &options, &mut sink).map_err(|e| match e {
+        MeshError::Interrupted => BuildError::Interrupted,
+        e => BuildError::Input(e),
+    })?;
     progress.finish_stage();
     let Sink {
         vertices,
@@ -237,6 +369,7 @@ pub fn import(input: &Path, tmp: &Path, progress: &dyn Progress) -> Result<Impor
         ..attributes
     };
     Ok(Imported {
+        input: input.to_path_buf(),
         vertices: VertexStore::open(&vpath)?,
         faces_path: fpath,
         face_count,
@@ -473,6 +606,72 @@ fn unit(n: &mut [f32; 3]) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn declared_sizes_over_the_limits_are_refused_before_spooling() {
+        // Why: issue 29, item 3: a 269-byte glTF declaring 3 x 10^9 positions spooled
+        // until the disk was full.
+        let h = MeshHeader {
+            vertex_count: Some(3_000_000_000),
+            face_count: Some(1_000_000_000),
+            ..MeshHeader::default()
+        };
+        let tmp = Path::new("/tmp");
+        let l = ImportLimits::default();
+        let why = check_declared(&h, &l, tmp, Some(100_000_000_000)).unwrap();
+        assert!(
+            why.contains("spools 132.0 GB to /tmp, which has 100.0 GB free"),
+            "{why}"
+        );
+        assert!(check_declared(&h, &l, tmp, Some(200_000_000_000)).is_none());
+        assert!(check_declared(&h, &l, tmp, None).is_none());
+        let small = ImportLimits {
+            max_input_triangles: 1000,
+            ..ImportLimits::default()
+        };
+        let why = check_declared(&h, &small, tmp, None).unwrap();
+        assert!(
+            why.contains("more than --max-input-triangles 1000"),
+            "{why}"
+        );
+        assert!(free_bytes(tmp).is_some_and(|b| b > 0));
+    }
+
+    /// A progress that asks to stop from the start.
+    struct Stopped;
+    impl Progress for Stopped {
+        fn stage(&self, _: &str, _: u64) {}
+        fn advance(&self, _: u64) {}
+        fn finish_stage(&self) {}
+        fn cancelled(&self) -> bool {
+            true
+        }
+    }
+
+    #[test]
+    fn cancelling_stops_the_vertex_spool() {
+        // Why: issue 29, item 3: Ctrl-C was polled per 2^20 triangles only, after every
+        // vertex was spooled (here 10^7 zeros: 400 MB; in the issue 3 x 10^9: the disk).
+        let dir = tempfile::tempdir().unwrap();
+        let input = dir.path().join("zeros.gltf");
+        std::fs::write(
+            &input,
+            r#"{"asset":{"version":"2.0"},
+"accessors":[{"componentType":5126,"count":10000000,"type":"VEC3","min":[0,0,0],"max":[0,0,0]}],
+"meshes":[{"primitives":[{"attributes":{"POSITION":0}}]}]}"#,
+        )
+        .unwrap();
+        let tmp = tempfile::tempdir().unwrap();
+        let r = import(&input, tmp.path(), &ImportLimits::default(), &Stopped);
+        assert!(matches!(r, Err(BuildError::Interrupted)), "{:?}", r.err());
+        let spooled = std::fs::metadata(tmp.path().join("vertices.bin"))
+            .unwrap()
+            .len();
+        assert!(
+            spooled <= (1 << 16) * 40,
+            "{spooled} bytes spooled after the stop"
+        );
+    }
 
     fn rss_file_kib() -> Option<u64> {
         let s = std::fs::read_to_string("/proc/self/status").ok()?;

@@ -73,7 +73,23 @@ pub struct BuildOptions {
     pub ignore_textures: bool,
     /// How patch textures are stored.
     pub texture: texture::TextureOptions,
+    /// Where the files the input names (glTF buffers and images, MTL libraries and
+    /// textures) may be read from: `None` (the default), only regular files under the
+    /// input's folder; else under it or under this folder (`--asset-root`).
+    pub asset_root: Option<PathBuf>,
+    /// Most triangles the input may have, checked against what its header declares
+    /// before anything is spooled, and as triangles arrive (`--max-input-triangles`;
+    /// default [`DEFAULT_MAX_INPUT_TRIANGLES`]).
+    pub max_input_triangles: u64,
 }
+
+/// [`BuildOptions::max_input_triangles`] by default: 2^32 - 1. Vertices are indexed
+/// with 32 bits, so 2^32 - 1 vertices is the largest input the builder takes; a mesh
+/// has about twice as many triangles as vertices, so this admits any input of up to
+/// ~2^31 vertices (a 4-billion-triangle scan: a ~170 GB import spool) while a file that
+/// claims more triangles than it could index vertices for (a 269-byte glTF claiming
+/// 10^10) is refused at once. Raise it for larger inputs.
+pub const DEFAULT_MAX_INPUT_TRIANGLES: u64 = u32::MAX as u64;
 
 /// [`BuildOptions::color_weight`] by default: the order of the normals' weight (0.5,
 /// meshoptimizer's suggestion for unit normals), as colour edges in scans matter as
@@ -94,6 +110,8 @@ impl Default for BuildOptions {
             ignore_colors: false,
             ignore_textures: false,
             texture: texture::TextureOptions::default(),
+            asset_root: None,
+            max_input_triangles: DEFAULT_MAX_INPUT_TRIANGLES,
         }
     }
 }
@@ -115,6 +133,22 @@ pub enum BuildError {
     },
     #[error("{}: the mesh has no triangles", .0.display())]
     EmptyInput(PathBuf),
+    /// Every input triangle was removed as degenerate (zero area in the input, or its
+    /// corners on one grid point): the model would be empty. `why` says how.
+    #[error(
+        "{}: every one of the {triangles} input triangles is degenerate ({why}): the model \
+         would be empty",
+        input.display()
+    )]
+    AllDegenerate {
+        input: PathBuf,
+        triangles: u64,
+        why: String,
+    },
+    /// The input is within the format's limits but beyond what the options allow (a
+    /// texture too large to decode within `--memory`); `detail` says what to change.
+    #[error("{}: {detail}", input.display())]
+    Limit { input: PathBuf, detail: String },
     #[error(transparent)]
     Format(#[from] FormatError),
     #[error("invalid option: {0}")]
@@ -400,9 +434,37 @@ fn build_in_pool(
             Ok(())
         }
     };
-    let mut imported = import::import(input, tmp.path(), progress)?;
+    let limits = import::ImportLimits {
+        assets: match &opts.asset_root {
+            Some(root) => tessera_mesh::AssetPolicy::under(root),
+            None => tessera_mesh::AssetPolicy::input_folder(),
+        },
+        max_input_triangles: opts.max_input_triangles,
+    };
+    let mut imported = import::import(input, tmp.path(), &limits, progress)?;
     if opts.ignore_colors {
         imported.attributes.colors = false;
+    }
+    // Every vertex at one point: every triangle is degenerate, known now. Refused before
+    // the partition, which cannot split such an input and would load it as one leaf
+    // (3 x 10^7 coincident vertices took 1.1-1.4 GB with --memory 64M; issue 29).
+    if imported.bounds.min == imported.bounds.max {
+        return Err(BuildError::AllDegenerate {
+            input: input.to_path_buf(),
+            triangles: imported.face_count,
+            why: format!(
+                "all {} vertices lie at one point, {:?}",
+                imported.vertex_count, imported.bounds.min
+            ),
+        });
+    }
+    if imported.attributes.textures && !opts.ignore_textures {
+        texture::check_decode_memory(&imported.report.textures, opts.memory_bytes).map_err(
+            |detail| BuildError::Limit {
+                input: input.to_path_buf(),
+                detail,
+            },
+        )?;
     }
     check()?;
     report.input_vertices = imported.vertex_count;

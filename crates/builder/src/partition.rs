@@ -900,7 +900,9 @@ mod tests {
             node_triangles: 32,
             ..Default::default()
         };
-        let imp = crate::import::import(&input, dir.path(), &crate::NoProgress).unwrap();
+        let imp =
+            crate::import::import(&input, dir.path(), &Default::default(), &crate::NoProgress)
+                .unwrap();
         let part = partition(&imp, dir.path(), &opts, &crate::NoProgress).unwrap();
         assert!(part.leaves.len() > 50);
         let buckets = File::open(&part.buckets).unwrap();

@@ -680,7 +680,7 @@ impl Baker {
             [w, h] => u64::from(w) * u64::from(h) * DECODE_BYTES_PER_TEXEL,
         };
         let ticket = self.gate.enter(estimate);
-        let result = match read_image(&src.image) {
+        let result = match read_image(&src.image, src.size) {
             Ok((w, h, rgba)) => {
                 let spool = self.spool()?;
                 let levels = build_pyramid(Texels { w, h, rgba }, |l| {
@@ -1234,12 +1234,57 @@ fn encode_bc7(width: u32, height: u32, rgba: &[u8]) -> Result<PatchTexture, Buil
     Ok(PatchTexture::from_bc7(width, height, levels)?)
 }
 
-/// Reads and decodes an image to RGBA8.
-fn read_image(src: &ImageSource) -> Result<(u32, u32, Vec<u8>), String> {
+/// Refuses, before any work, a texture image whose decode needs more memory than
+/// `memory_bytes` (`--memory`) allows: about [`DECODE_BYTES_PER_TEXEL`] bytes a texel
+/// (its size is read from its header at import). A small PNG may claim 11000 x 11000
+/// texels (968 MB to decode); an image larger than the stage's share of the budget
+/// decodes alone, so the whole budget is the bound. The error is the message.
+pub fn check_decode_memory(sources: &[TextureSource], memory_bytes: u64) -> Result<(), String> {
+    for src in sources {
+        let [w, h] = src.size;
+        let need = u64::from(w) * u64::from(h) * DECODE_BYTES_PER_TEXEL;
+        if need > memory_bytes {
+            return Err(format!(
+                "texture image '{}' is {w} x {h} texels: decoding it needs about {} MiB \
+                 ({DECODE_BYTES_PER_TEXEL} bytes a texel), more than --memory {} MiB allows; \
+                 raise --memory to at least {} MiB, or build with --ignore-textures",
+                src.image_name,
+                need >> 20,
+                memory_bytes >> 20,
+                need.div_ceil(1 << 20)
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Whether the JPEG `bytes` ends its last scan with an end-of-image marker (`FF D9`).
+/// A JPEG cut short decodes without an error (the decoder fills the missing rows with
+/// grey), so this is the only sign of it. Inside the entropy-coded data every `FF` is
+/// followed by `00` or a restart marker, so `FF D9` after the last start-of-scan
+/// (`FF DA`) is the real end; an EXIF thumbnail's own markers come before the frame.
+fn jpeg_is_complete(bytes: &[u8]) -> bool {
+    let last_scan = bytes.windows(2).rposition(|w| w == [0xFF, 0xDA]);
+    match last_scan {
+        Some(at) => bytes[at..].windows(2).any(|w| w == [0xFF, 0xD9]),
+        // No scan at all: the decoder says what is wrong.
+        None => true,
+    }
+}
+
+/// Reads and decodes an image to RGBA8; a truncated JPEG is an error. `size` (from the
+/// header read at import; `[0, 0]` when unknown) bounds the decoder: a file that now
+/// claims more texels is refused rather than decoded.
+fn read_image(src: &ImageSource, size: [u32; 2]) -> Result<(u32, u32, Vec<u8>), String> {
+    let regular = |p: &Path| tessera_mesh::open_regular(p).map_err(|e| e.to_string());
     let bytes: Vec<u8> = match src {
-        ImageSource::File(p) => std::fs::read(p).map_err(|e| e.to_string())?,
+        ImageSource::File(p) => {
+            let mut b = Vec::new();
+            regular(p)?.read_to_end(&mut b).map_err(|e| e.to_string())?;
+            b
+        }
         ImageSource::FileRange { path, offset, len } => {
-            let mut f = std::fs::File::open(path).map_err(|e| e.to_string())?;
+            let mut f = regular(path)?;
             f.seek(SeekFrom::Start(*offset))
                 .map_err(|e| e.to_string())?;
             let mut b = Vec::new();
@@ -1253,11 +1298,23 @@ fn read_image(src: &ImageSource) -> Result<(u32, u32, Vec<u8>), String> {
         }
         ImageSource::Memory { bytes, .. } => bytes.to_vec(),
     };
-    let img = image::ImageReader::new(std::io::Cursor::new(&bytes[..]))
+    let mut reader = image::ImageReader::new(std::io::Cursor::new(&bytes[..]))
         .with_guessed_format()
-        .map_err(|e| e.to_string())?
-        .decode()
         .map_err(|e| e.to_string())?;
+    if reader.format() == Some(image::ImageFormat::Jpeg) && !jpeg_is_complete(&bytes) {
+        return Err(
+            "the JPEG is truncated (no end-of-image marker after its last scan: \
+                    the file was cut short)"
+                .to_string(),
+        );
+    }
+    if size[0] > 0 && size[1] > 0 {
+        let mut limits = image::Limits::default();
+        limits.max_image_width = Some(size[0]);
+        limits.max_image_height = Some(size[1]);
+        reader.limits(limits);
+    }
+    let img = reader.decode().map_err(|e| e.to_string())?;
     let (w, h) = (img.width(), img.height());
     Ok((w, h, img.into_rgba8().into_raw()))
 }
@@ -1265,6 +1322,52 @@ fn read_image(src: &ImageSource) -> Result<(u32, u32, Vec<u8>), String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_truncated_jpeg_is_an_error_not_grey_rows() {
+        // Why: issue 29, item 8: a JPEG cut short decoded without an error, the missing
+        // rows grey, and was baked into the patches as if whole.
+        let mut jpeg = std::io::Cursor::new(Vec::new());
+        let img =
+            image::RgbImage::from_fn(64, 64, |x, y| image::Rgb([x as u8 * 4, y as u8 * 4, 7]));
+        img.write_to(&mut jpeg, image::ImageFormat::Jpeg).unwrap();
+        let whole = jpeg.into_inner();
+        let src = |b: &[u8]| ImageSource::Memory {
+            key: "t".into(),
+            bytes: b.into(),
+        };
+        assert!(jpeg_is_complete(&whole));
+        assert_eq!(read_image(&src(&whole), [64, 64]).unwrap().0, 64);
+        let cut = &whole[..whole.len() * 2 / 3];
+        // The negative control: the decoder alone takes the cut file without a word.
+        assert!(image::load_from_memory(cut).is_ok());
+        assert!(!jpeg_is_complete(cut));
+        let e = read_image(&src(cut), [64, 64]).unwrap_err();
+        assert!(e.contains("truncated"), "{e}");
+        // Trailing bytes after the end marker are not truncation.
+        let mut padded = whole.clone();
+        padded.extend_from_slice(&[0; 100]);
+        assert!(read_image(&src(&padded), [64, 64]).is_ok());
+        // An image that claims more texels than its header said at import is refused.
+        assert!(read_image(&src(&whole), [32, 32]).is_err());
+    }
+
+    #[test]
+    fn images_too_large_for_the_memory_budget_are_refused() {
+        // Why: issue 29, item 8: 11000 x 11000 texels cost 575 MB whatever --memory.
+        let t = |w, h| TextureSource {
+            material: "m".into(),
+            image: ImageSource::File("big.png".into()),
+            image_name: "big.png".into(),
+            tint: [255; 4],
+            wrap: [Wrap::Repeat; 2],
+            v_up: true,
+            size: [w, h],
+        };
+        let e = check_decode_memory(&[t(11000, 11000)], 256 << 20).unwrap_err();
+        assert!(e.contains("more than --memory 256 MiB"), "{e}");
+        check_decode_memory(&[t(4096, 4096)], 256 << 20).unwrap();
+    }
 
     fn rect(texture: u32, x0: i64, y0: i64, x1: i64, y1: i64) -> Rect {
         Rect {

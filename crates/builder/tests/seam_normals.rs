@@ -70,7 +70,7 @@ fn copies_of_a_position_share_one_computed_normal() {
     // An ample memory budget (one pass over the positions) and a tiny one (many).
     for memory in [1u64 << 30, 1 << 10] {
         let tmp = tempfile::tempdir().unwrap();
-        let imp = import(&input, tmp.path(), &NoProgress).unwrap();
+        let imp = import(&input, tmp.path(), &Default::default(), &NoProgress).unwrap();
         assert!(imp.normals_computed && imp.attributes.uvs);
         let normals = compute_normals(&imp, tmp.path(), memory, &|| false).unwrap();
         let mut by_pos: std::collections::HashMap<[u32; 3], Vec<u32>> = Default::default();

@@ -50,6 +50,17 @@ pub struct Args {
     /// Ignore the input's textures (faces in their material's colour).
     #[arg(long)]
     ignore_textures: bool,
+    /// A folder under which the files the input names (glTF buffers and images, OBJ
+    /// material libraries and their textures) may be read, besides the input's own
+    /// folder (the only one by default): a reference outside both (`../x.bin`, an
+    /// absolute path, a symlink out) is an error. Only regular files are ever read.
+    #[arg(long, value_name = "DIR")]
+    asset_root: Option<PathBuf>,
+    /// Most triangles the input may have, checked against its header before anything
+    /// is written (glTF, PLY, binary STL) and as triangles arrive (OBJ). The default,
+    /// 2^32-1, admits any input whose vertices 32-bit indices can address.
+    #[arg(long, value_name = "N", default_value_t = tessera_build::DEFAULT_MAX_INPUT_TRIANGLES)]
+    max_input_triangles: u64,
     /// How patch textures are stored: bc7 (GPU block compression with its mips stored:
     /// a quarter of RGBA8's GPU memory, no image decode at load, within BC7's error of
     /// the source), png (lossless: the finest patches keep the source texels exactly,
@@ -73,6 +84,13 @@ pub struct Args {
 }
 
 pub fn run(a: Args) -> anyhow::Result<ExitCode> {
+    if let Some(root) = &a.asset_root {
+        anyhow::ensure!(
+            root.is_dir(),
+            "--asset-root {}: no such directory",
+            root.display()
+        );
+    }
     let opts = BuildOptions {
         memory_bytes: a.memory,
         threads: a.threads,
@@ -93,6 +111,8 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
             quality: a.texture_quality,
             recut: !a.no_recut,
         },
+        asset_root: a.asset_root,
+        max_input_triangles: a.max_input_triangles,
     };
     let bars = Bars::new(a.quiet || a.json);
     crate::progress::install_interrupt_handler();

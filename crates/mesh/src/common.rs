@@ -9,6 +9,9 @@ use crate::{ImportReport, MeshError, MeshVisitor};
 #[derive(Default)]
 pub(crate) struct PolygonEmitter {
     scratch: Vec<u32>,
+    /// Polygons seen, to poll [`MeshVisitor::cancelled`] every [`POLL_EVERY`]: skipped
+    /// faces reach no visitor call, and a file of 10^9 of them must stay interruptible.
+    seen: u64,
 }
 
 impl PolygonEmitter {
@@ -24,6 +27,10 @@ impl PolygonEmitter {
         visitor: &mut dyn MeshVisitor,
         report: &mut ImportReport,
     ) -> Result<(), MeshError> {
+        self.seen += 1;
+        if self.seen.is_multiple_of(POLL_EVERY) {
+            poll(visitor)?;
+        }
         match *corners {
             [a, b, c] => {
                 if a == b || b == c || a == c {
@@ -63,6 +70,20 @@ impl PolygonEmitter {
         report.polygons_triangulated += 1;
         Ok(())
     }
+}
+
+/// Units of work (vertices, corners, skipped faces) between two polls of
+/// [`MeshVisitor::cancelled`]: 65536 is well under a millisecond of any reader's work,
+/// and the poll (an atomic load in the CLI) costs nothing at that rate.
+pub(crate) const POLL_EVERY: u64 = 1 << 16;
+
+/// [`MeshError::Interrupted`] when the visitor says stop.
+#[inline]
+pub(crate) fn poll(visitor: &dyn MeshVisitor) -> Result<(), MeshError> {
+    if visitor.cancelled() {
+        return Err(MeshError::Interrupted);
+    }
+    Ok(())
 }
 
 /// Distinct names [`ImportReport::ignored_by_name`] keeps; later ones go under `other names`

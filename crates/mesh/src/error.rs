@@ -63,6 +63,15 @@ pub enum MeshError {
     /// A writer was used against its contract (counts, order).
     #[error("{}: {detail}", path.display())]
     Usage { path: PathBuf, detail: String },
+    /// A file the input names (a glTF buffer or image, an OBJ material library or
+    /// texture) that may not be read: outside the allowed root, not a regular file, or
+    /// too large (see [`crate::AssetPolicy`]). `detail` names the reference and what to
+    /// do.
+    #[error("{}: {detail}", path.display())]
+    Refused { path: PathBuf, detail: String },
+    /// The reader stopped because [`crate::MeshVisitor::cancelled`] said so (Ctrl-C).
+    #[error("interrupted")]
+    Interrupted,
     /// An error raised by a [`crate::MeshVisitor`], passed through unchanged.
     #[error("{0}")]
     Visitor(String),

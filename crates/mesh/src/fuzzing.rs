@@ -1,4 +1,4 @@
-//! Entry points of the fuzz targets (`fuzz/fuzz_targets/{ply,obj,stl,gltf}.rs`) and of their
+//! Entry points of the fuzz targets (`fuzz/fuzz_targets/{ply,obj,stl,gltf,mtl}.rs`) and of their
 //! replay as ordinary tests (`tests/corpus.rs`): one function per target, so the two
 //! cannot drift apart.
 //!
@@ -146,7 +146,7 @@ pub fn fuzz_ply(data: &[u8]) -> Result<ImportReport, MeshError> {
 /// The OBJ target: the bytes as a `.obj` file.
 pub fn fuzz_obj(data: &[u8]) -> Result<ImportReport, MeshError> {
     let mut v = CheckingVisitor::default();
-    let r = crate::obj::read_obj_from(Path::new(FUZZ_PATH), || Ok(data), &mut v);
+    let r = crate::obj::read_obj_from(Path::new(FUZZ_PATH), None, || Ok(data), &mut v);
     check(r, &v)
 }
 
@@ -169,4 +169,29 @@ pub fn fuzz_gltf(data: &[u8]) -> Result<ImportReport, MeshError> {
     let mut v = CheckingVisitor::default();
     let r = crate::gltf_import::read_gltf_from(Path::new(FUZZ_PATH), data, None, &mut v);
     check(r, &v)
+}
+
+/// The MTL target (issue 29): the bytes as a material library, parsed as the OBJ
+/// reader parses one, with no file opened (its `map_Kd` images are not resolved); every
+/// material is then used as the reader uses it (tint, texture source, UV transform).
+/// Returns an empty report: a library delivers no geometry.
+pub fn fuzz_mtl(data: &[u8]) -> Result<ImportReport, MeshError> {
+    let mut lib = crate::mtl::Library::default();
+    let text = String::from_utf8_lossy(data);
+    lib.parse(Path::new(FUZZ_PATH), &text, None)
+        .map_err(|detail| MeshError::Refused {
+            path: FUZZ_PATH.into(),
+            detail,
+        })?;
+    for (name, m) in &lib.materials {
+        assert!(m.kd.iter().all(|c| c.is_finite()), "{name}: Kd {:?}", m.kd);
+        let _ = m.tint([200, 100, 50, 255]);
+        if let Some(map) = &m.map_kd {
+            assert!(!map.name.trim().is_empty(), "{name}: map_Kd without a name");
+            let _ = map.transform([0.5, 0.5]);
+            let t = m.texture_source(name, [1, 1]);
+            assert!(t.is_some(), "{name}: a map_Kd without a texture source");
+        }
+    }
+    Ok(ImportReport::default())
 }

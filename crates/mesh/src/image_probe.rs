@@ -12,6 +12,8 @@
 use std::io::{Cursor, Read, Seek, SeekFrom};
 use std::path::Path;
 
+use crate::assets::open_regular;
+
 /// Prefix lengths tried in turn.
 const PREFIX_STEPS: [u64; 3] = [64 << 10, 1 << 20, 16 << 20];
 
@@ -28,7 +30,7 @@ pub(crate) enum ProbeError {
 
 /// The width and height of the PNG or JPEG file at `path`.
 pub(crate) fn probe_file(path: &Path) -> Result<[u32; 2], ProbeError> {
-    let file = std::fs::File::open(path).map_err(ProbeError::Missing)?;
+    let file = open_regular(path).map_err(ProbeError::Missing)?;
     let meta = file.metadata().map_err(ProbeError::Missing)?;
     if !meta.is_file() {
         return Err(ProbeError::Missing(std::io::Error::other(
@@ -50,7 +52,7 @@ pub(crate) fn probe_file(path: &Path) -> Result<[u32; 2], ProbeError> {
 /// The width and height of the image in bytes `offset..offset + len` of the file at
 /// `path` (a glTF buffer view).
 pub(crate) fn probe_file_range(path: &Path, offset: u64, len: u64) -> Result<[u32; 2], ProbeError> {
-    let mut file = std::fs::File::open(path).map_err(ProbeError::Missing)?;
+    let mut file = open_regular(path).map_err(ProbeError::Missing)?;
     let size = file.metadata().map_err(ProbeError::Missing)?.len();
     match offset.checked_add(len) {
         Some(end) if end <= size => {}

@@ -7,6 +7,7 @@
 //! [`MeshError`] naming the file and the problem; problems that can be skipped safely
 //! (degenerate faces, for instance) are counted in the [`ImportReport`] instead.
 
+mod assets;
 mod common;
 mod error;
 #[doc(hidden)]
@@ -22,6 +23,7 @@ mod source;
 mod stl;
 mod types;
 
+pub use assets::{open_regular, AssetPolicy, ReadOptions};
 pub use error::MeshError;
 pub use ply_write::{PlyWriter, PlyWriterOptions};
 pub use progress::{NoProgress, Progress};
@@ -117,7 +119,22 @@ fn head_of(r: impl std::io::Read, n: u64) -> std::io::Result<Vec<u8>> {
 /// formats, other coordinate sets) leave their vertices untextured in the material's
 /// colour and are reported ([`ImportReport::textures_not_used`], `missing_files`,
 /// `unreadable_images`) with a warning.
+///
+/// Files the input names (glTF buffers and images, OBJ material libraries and their
+/// textures) are read only when they are regular files under the input's folder (see
+/// [`read_mesh_with`] to allow another folder).
 pub fn read_mesh(path: &Path, visitor: &mut dyn MeshVisitor) -> Result<ImportReport, MeshError> {
+    read_mesh_with(path, &ReadOptions::default(), visitor)
+}
+
+/// [`read_mesh`] with options: [`ReadOptions::assets`] says where the files the input
+/// names may be read from (by default, only regular files under the input's folder,
+/// symlinks resolved; a reference elsewhere is an error naming it).
+pub fn read_mesh_with(
+    path: &Path,
+    options: &ReadOptions,
+    visitor: &mut dyn MeshVisitor,
+) -> Result<ImportReport, MeshError> {
     use flate2::read::MultiGzDecoder;
     let io = |e| MeshError::io(path, e);
     let open = || std::fs::File::open(path).map_err(io);
@@ -135,9 +152,9 @@ pub fn read_mesh(path: &Path, visitor: &mut dyn MeshVisitor) -> Result<ImportRep
     };
     match (format, gzip) {
         (InputFormat::Ply, false) => ply_read::read_ply(path, visitor),
-        (InputFormat::Obj, false) => obj::read_obj(path, visitor),
+        (InputFormat::Obj, false) => obj::read_obj(path, options, visitor),
         (InputFormat::Stl, false) => stl::read_stl(path, visitor),
-        (InputFormat::Gltf, false) => gltf_import::read_gltf(path, visitor),
+        (InputFormat::Gltf, false) => gltf_import::read_gltf(path, options, visitor),
         // glTF is read through a memory map (buffers are random access): inflating it
         // would mean a temporary copy of the whole file.
         (InputFormat::Gltf, true) => Err(MeshError::malformed(
@@ -146,7 +163,7 @@ pub fn read_mesh(path: &Path, visitor: &mut dyn MeshVisitor) -> Result<ImportRep
             "a gzip-compressed glTF is not read; decompress it first (gunzip)",
         )),
         (InputFormat::Ply, true) => ply_read::read_ply_from(path, open_gz()?, visitor),
-        (InputFormat::Obj, true) => obj::read_obj_from(path, open_gz, visitor),
+        (InputFormat::Obj, true) => obj::read_obj_from(path, Some(options), open_gz, visitor),
         (InputFormat::Stl, true) => {
             // Binary STL is told from ASCII by its size: inflate once to count.
             let size = std::io::copy(&mut open_gz()?, &mut std::io::sink()).map_err(io)?;

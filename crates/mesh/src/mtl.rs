@@ -11,12 +11,17 @@
 //! others (`-bm`, `-mm`, `-t`, `-blendu`, ...) do not change which texel a vertex
 //! samples and are ignored. Images are looked up relative to the library's directory,
 //! names may hold spaces; their headers are read (for their size) once per image.
+//! Libraries and images are read only where [`crate::AssetPolicy`] allows (regular
+//! files under the input's folder by default), libraries up to [`MAX_LIBRARY_BYTES`].
 
 use std::collections::HashMap;
+use std::io::Read;
 use std::path::{Path, PathBuf};
 
+use crate::assets::{folder_of, open_regular, AssetError, Assets};
+use crate::gltf_import::clip;
 use crate::image_probe::{probe_file, ProbeError};
-use crate::{ImageSource, ImportReport, TextureSource, Wrap};
+use crate::{ImageSource, ImportReport, MeshError, TextureSource, Wrap};
 
 /// One material of a library.
 #[derive(Clone, Debug, PartialEq)]
@@ -114,31 +119,79 @@ pub(crate) struct Library {
 }
 
 impl Library {
-    /// Load the libraries `names` (as written after `mtllib`) beside `obj`. A library that
-    /// cannot be read is a warning (its materials are drawn white), never an error: the
-    /// geometry is all there.
-    pub fn load(obj: &Path, names: &[String], report: &mut ImportReport) -> Library {
-        let dir = obj.parent().unwrap_or(Path::new("."));
+    /// Load the libraries `names` (as written after `mtllib`) beside `obj`, under the
+    /// policy `assets` (`None`: no file is opened, every library is missing). A library
+    /// that is missing or cannot be read is a warning (its materials are drawn white):
+    /// the geometry is all there. A library or texture the policy refuses (outside the
+    /// allowed root, not a regular file, a library over [`MAX_LIBRARY_BYTES`]) is an
+    /// error.
+    pub fn load(
+        obj: &Path,
+        assets: Option<&Assets>,
+        names: &[String],
+        report: &mut ImportReport,
+    ) -> Result<Library, MeshError> {
+        let dir = folder_of(obj);
         let mut lib = Library::default();
+        let refused = |detail: String| MeshError::Refused {
+            path: obj.to_path_buf(),
+            detail,
+        };
         for name in names {
             for file in library_files(dir, name) {
-                match std::fs::read(&file) {
-                    Ok(bytes) => lib.parse(&file, &String::from_utf8_lossy(&bytes)),
-                    Err(e) => {
-                        tracing::warn!(
-                            "{}: material library {} cannot be read ({e}): its materials are drawn white",
-                            obj.display(),
-                            file.display()
-                        );
-                        report.missing_files.push(file.display().to_string());
+                let missing = |shown: &Path, why: &dyn std::fmt::Display, r: &mut ImportReport| {
+                    tracing::warn!(
+                        "{}: material library {} cannot be read ({why}): its materials are drawn white",
+                        obj.display(),
+                        shown.display()
+                    );
+                    r.missing_files.push(shown.display().to_string());
+                };
+                let Some(assets) = assets else {
+                    missing(&dir.join(&file), &"no file may be opened", report);
+                    continue;
+                };
+                let what = format!("material library (mtllib) '{}'", clip(&file));
+                let resolved = match assets.resolve(dir, &file, &what) {
+                    Ok(p) => p,
+                    Err(AssetError::Missing { resolved, cause }) => {
+                        missing(&resolved, &cause, report);
+                        continue;
                     }
+                    Err(AssetError::Refused(why)) => return Err(refused(why)),
+                };
+                match read_library(&resolved) {
+                    Ok(bytes) => {
+                        // Its textures are named relative to the folder it is named in
+                        // (a symlinked library's, not its target's), as before.
+                        let text = String::from_utf8_lossy(&bytes);
+                        lib.parse(&dir.join(&file), &text, Some(assets))
+                            .map_err(refused)?;
+                    }
+                    Err(LibraryError::TooLarge(size)) => {
+                        return Err(refused(format!(
+                            "{what} ({}) has {size} bytes, more than the {} MiB a material \
+                             library may have",
+                            resolved.display(),
+                            MAX_LIBRARY_BYTES >> 20
+                        )))
+                    }
+                    Err(LibraryError::Io(e)) => missing(&resolved, &e, report),
                 }
             }
         }
-        lib
+        Ok(lib)
     }
 
-    fn parse(&mut self, file: &Path, text: &str) {
+    /// Parse the library `file` (its text), its `map_Kd` images resolved under `assets`
+    /// (`None`: joined to its folder, unchecked, for tests); a refused image is an
+    /// error (the message).
+    pub(crate) fn parse(
+        &mut self,
+        file: &Path,
+        text: &str,
+        assets: Option<&Assets>,
+    ) -> Result<(), String> {
         let dir = file.parent().unwrap_or(Path::new("."));
         let mut current: Option<String> = None;
         for line in text.lines() {
@@ -183,8 +236,17 @@ impl Library {
                         continue;
                     };
                     if let Some((name, options)) = parse_map(rest) {
+                        let what = format!("texture (map_Kd) '{}'", clip(&name));
+                        let path = match assets.map(|a| a.resolve(dir, &name, &what)) {
+                            Some(Ok(p)) => p,
+                            Some(Err(AssetError::Refused(why))) => {
+                                return Err(format!("material library {}: {why}", file.display()))
+                            }
+                            // Missing: the image probe says so, with a warning.
+                            Some(Err(AssetError::Missing { .. })) | None => dir.join(&name),
+                        };
                         m.map_kd = Some(MapKd {
-                            path: dir.join(&name),
+                            path,
                             name,
                             clamp: options.clamp,
                             uv_transform: options.uv_transform(),
@@ -194,6 +256,7 @@ impl Library {
                 _ => {}
             }
         }
+        Ok(())
     }
 
     /// What the header of `path` gives, read the first time it is asked for.
@@ -274,15 +337,45 @@ impl Library {
     }
 }
 
-/// The files an `mtllib` line names: the whole rest of the line when such a file exists
-/// (names with spaces, as many exporters write them), else its whitespace-separated
-/// words (the specification's list of names).
-fn library_files(dir: &Path, rest: &str) -> Vec<PathBuf> {
-    let whole = dir.join(rest);
-    if whole.is_file() || !rest.contains(char::is_whitespace) {
-        return vec![whole];
+/// The file names an `mtllib` line gives: the whole rest of the line when such a file
+/// exists in `dir` (names with spaces, as many exporters write them), else its
+/// whitespace-separated words (the specification's list of names).
+fn library_files(dir: &Path, rest: &str) -> Vec<String> {
+    if dir.join(rest).is_file() || !rest.contains(char::is_whitespace) {
+        return vec![rest.to_string()];
     }
-    rest.split_ascii_whitespace().map(|w| dir.join(w)).collect()
+    rest.split_ascii_whitespace().map(str::to_string).collect()
+}
+
+/// The largest material library read: 64 MiB. A library is text, tens of bytes per
+/// statement; the largest real ones (CAD exports with thousands of materials) are a few
+/// MB. It is read whole (and copied once more if it is not UTF-8), so the limit bounds
+/// what a hostile `mtllib` costs in memory, far above any real library.
+pub(crate) const MAX_LIBRARY_BYTES: u64 = 64 << 20;
+
+enum LibraryError {
+    /// Its size in bytes, over [`MAX_LIBRARY_BYTES`].
+    TooLarge(u64),
+    Io(std::io::Error),
+}
+
+/// The bytes of the (regular, already resolved) library file `path`, at most
+/// [`MAX_LIBRARY_BYTES`] of them.
+fn read_library(path: &Path) -> Result<Vec<u8>, LibraryError> {
+    let file = open_regular(path).map_err(LibraryError::Io)?;
+    let size = file.metadata().map_err(LibraryError::Io)?.len();
+    if size > MAX_LIBRARY_BYTES {
+        return Err(LibraryError::TooLarge(size));
+    }
+    let mut bytes = Vec::with_capacity(size as usize);
+    // `take`: the file may grow after the size was read.
+    file.take(MAX_LIBRARY_BYTES + 1)
+        .read_to_end(&mut bytes)
+        .map_err(LibraryError::Io)?;
+    if bytes.len() as u64 > MAX_LIBRARY_BYTES {
+        return Err(LibraryError::TooLarge(bytes.len() as u64));
+    }
+    Ok(bytes)
 }
 
 /// The options of a `map_Kd` statement that change how the image is sampled.
@@ -411,7 +504,9 @@ mod tests {
         lib.parse(
             Path::new("/nowhere/m.mtl"),
             "newmtl red\nKd 1 0 0\nnewmtl grey\nKd 0.5\nnewmtl plain\nmap_Kd t.png\n",
-        );
+            None,
+        )
+        .unwrap();
         let red = &lib.materials["red"];
         assert_eq!(red.tint([200, 200, 200, 255]), [200, 0, 0, 255]);
         assert_eq!(lib.materials["grey"].kd, [0.5; 3]);

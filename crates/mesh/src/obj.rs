@@ -40,10 +40,13 @@ use std::fs::File;
 use std::io::Read;
 use std::path::Path;
 
+use crate::assets::Assets;
 use crate::common::{finish_report, note_ignored, PolygonEmitter};
 use crate::mtl::{Library, Material};
 use crate::source::{ReadErr, Source};
-use crate::{Attributes, ImportReport, MeshError, MeshHeader, MeshVisitor, Vertex, NO_TEXTURE};
+use crate::{
+    Attributes, ImportReport, MeshError, MeshHeader, MeshVisitor, ReadOptions, Vertex, NO_TEXTURE,
+};
 
 /// Longest (joined) line accepted: a polygon with ~a million corners.
 const MAX_LINE: usize = 16 << 20;
@@ -57,21 +60,29 @@ const NONE: u32 = u32::MAX;
 /// Read the OBJ file at `path` into `visitor`.
 pub(crate) fn read_obj(
     path: &Path,
+    options: &ReadOptions,
     visitor: &mut dyn MeshVisitor,
 ) -> Result<ImportReport, MeshError> {
-    read_obj_from(path, || open(path), visitor)
+    read_obj_from(path, Some(options), || open(path), visitor)
 }
 
 /// Read OBJ data from the streams `open` returns (called twice: the first pass, then
-/// the second); `path` is only used in messages.
+/// the second); `path` is only used in messages and to find the material libraries,
+/// which are read under `options`' policy (`None`: no other file is opened, as when
+/// fuzzing: every library is missing).
 pub(crate) fn read_obj_from<R: Read>(
     path: &Path,
+    options: Option<&ReadOptions>,
     mut open: impl FnMut() -> Result<R, MeshError>,
     visitor: &mut dyn MeshVisitor,
 ) -> Result<ImportReport, MeshError> {
     let scan = prescan(path, open()?)?;
     let mut report = ImportReport::default();
-    let mut library = Library::load(path, &scan.mtllibs, &mut report);
+    let assets = match options {
+        Some(o) if !scan.mtllibs.is_empty() => Some(Assets::for_input(&o.assets, path)?),
+        _ => None,
+    };
+    let mut library = Library::load(path, assets.as_ref(), &scan.mtllibs, &mut report)?;
     let material_colors = library.materials.values().any(|m| !m.is_white());
     let map_kd = library.materials.values().any(|m| m.map_kd.is_some());
     // Only faces with texture coordinates sample a texture; the pass stops at the first.

@@ -123,6 +123,13 @@ pub trait MeshVisitor {
     fn vertex(&mut self, vertex: &Vertex) -> Result<(), MeshError>;
     /// A triangle of vertex indices (global, 0-based, all already delivered).
     fn triangle(&mut self, indices: [u32; 3]) -> Result<(), MeshError>;
+    /// Whether the reader should stop (Ctrl-C: the builder maps its
+    /// [`crate::Progress::cancelled`] here). Readers poll it between chunks of work,
+    /// also where they deliver nothing for a long time (a run of skipped faces, an
+    /// accessor of zeros), and then return [`MeshError::Interrupted`].
+    fn cancelled(&self) -> bool {
+        false
+    }
 }
 
 /// Counts of what a reader delivered and what it skipped (each skip is also logged

@@ -1,4 +1,4 @@
-//! Replays the fuzz corpora of the mesh importers (`fuzz/corpus/{ply,obj,stl,gltf}/`, the
+//! Replays the fuzz corpora of the mesh importers (`fuzz/corpus/{ply,obj,stl,gltf,mtl}/`, the
 //! committed seeds) and every crash the fuzzers found (`fuzz/regressions/<target>/`,
 //! minimised) through the fuzz targets' own bodies (`tessera_mesh::fuzzing`), on stable:
 //! no panic, errors as clear one-line messages, and for each regression the error its
@@ -7,16 +7,17 @@
 
 use std::path::{Path, PathBuf};
 
-use tessera_mesh::fuzzing::{fuzz_gltf, fuzz_obj, fuzz_ply, fuzz_stl, FUZZ_PATH};
+use tessera_mesh::fuzzing::{fuzz_gltf, fuzz_mtl, fuzz_obj, fuzz_ply, fuzz_stl, FUZZ_PATH};
 use tessera_mesh::{ImportReport, MeshError};
 
 type Target = fn(&[u8]) -> Result<ImportReport, MeshError>;
 
-const TARGETS: [(&str, Target); 4] = [
+const TARGETS: [(&str, Target); 5] = [
     ("ply", fuzz_ply),
     ("obj", fuzz_obj),
     ("stl", fuzz_stl),
     ("gltf", fuzz_gltf),
+    ("mtl", fuzz_mtl),
 ];
 
 /// Each regression file and a piece of the error its fix gives.

@@ -829,7 +829,10 @@ fn a_bad_data_uri_is_an_error() {
             "data:application/octet-stream;base64",
             "bad data URI: no ','",
         ),
-        ("http://example.com/x.bin", "is not a relative file name"),
+        (
+            "http://example.com/x.bin",
+            "is a URL, which is never fetched",
+        ),
     ] {
         let root = d.root(rest.clone(), json!({"byteLength": d.bin.len(), "uri": uri}));
         let e = err_text("uri.gltf", &serde_json::to_vec(&root).unwrap());

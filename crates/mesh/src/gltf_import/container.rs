@@ -16,6 +16,7 @@ use std::path::{Path, PathBuf};
 use ::gltf::json;
 use base64::Engine as _;
 
+use crate::assets::{open_regular, AssetError, Assets};
 use crate::MeshError;
 
 /// `glTF`, little-endian: the first four bytes of every `.glb`.
@@ -133,7 +134,16 @@ impl BufferData {
 
 /// Memory-map `path` read-only (`None` for an empty file, which cannot be mapped).
 pub(crate) fn map_file(path: &Path) -> std::io::Result<Option<memmap2::Mmap>> {
-    let file = std::fs::File::open(path)?;
+    map_opened(std::fs::File::open(path)?)
+}
+
+/// [`map_file`] for a file the input names: refused unless it is a regular file, and
+/// opened without blocking ([`open_regular`]).
+fn map_regular(path: &Path) -> std::io::Result<Option<memmap2::Mmap>> {
+    map_opened(open_regular(path)?)
+}
+
+fn map_opened(file: std::fs::File) -> std::io::Result<Option<memmap2::Mmap>> {
     if file.metadata()?.len() == 0 {
         return Ok(None);
     }
@@ -145,11 +155,50 @@ pub(crate) fn map_file(path: &Path) -> std::io::Result<Option<memmap2::Mmap>> {
     Ok(Some(map))
 }
 
-/// How buffers are found: beside the glTF file, or nowhere (fuzzing: the input is one
-/// byte string and must not open files named by its content).
+/// Where a glTF's external files (buffers, images) are looked up: relative to `dir`
+/// (the glTF's folder), under the policy `assets`.
+#[derive(Clone, Copy)]
+pub(crate) struct External<'a> {
+    pub dir: &'a Path,
+    pub assets: &'a Assets,
+}
+
+/// Why an external file named by a URI is not read.
+pub(crate) enum UriError {
+    /// A URL (`file://`, `https://`): never fetched.
+    Url,
+    /// A bad `%` escape.
+    BadEscape,
+    /// Refused or missing: see [`AssetError`].
+    Asset(AssetError),
+}
+
+impl External<'_> {
+    /// The file the URI `uri` (not a `data:` URI) names, resolved under the policy;
+    /// `what` names it in messages (`glTF buffer 0 URI`).
+    pub(crate) fn resolve(&self, uri: &str, what: &str) -> Result<PathBuf, UriError> {
+        if uri.contains("://") {
+            return Err(UriError::Url);
+        }
+        let name = percent_decode(uri).ok_or(UriError::BadEscape)?;
+        let what = format!("{what} '{}'", clip(uri));
+        self.assets
+            .resolve(self.dir, &name, &what)
+            .map_err(UriError::Asset)
+    }
+}
+
+/// What a URL URI is told (`file://` included: only file names and `data:` URIs are read).
+pub(crate) const URL_REFUSED: &str = "is a URL, which is never fetched (file:// included); \
+    glTF files are read with data: URIs and relative file names, under the input's folder \
+    (or --asset-root DIR)";
+
+/// How buffers are found: through `external` (the glTF's folder and the asset
+/// policy), or nowhere (fuzzing: the input is one byte string and must not open files
+/// named by its content).
 pub(crate) struct Resolver<'a> {
     pub path: &'a Path,
-    pub base_dir: Option<&'a Path>,
+    pub external: Option<External<'a>>,
     pub bin: Option<Range<usize>>,
 }
 
@@ -194,14 +243,7 @@ impl Resolver<'_> {
                     MeshError::malformed(self.path, at, format!("bad data URI: {why}"))
                 });
         }
-        if uri.contains("://") {
-            return Err(MeshError::malformed(
-                self.path,
-                at,
-                format!("uri '{}' is not a relative file name; only files beside the glTF and data: URIs are read", clip(uri)),
-            ));
-        }
-        let Some(dir) = self.base_dir else {
+        let Some(external) = self.external else {
             return Err(MeshError::malformed(
                 self.path,
                 at,
@@ -211,19 +253,49 @@ impl Resolver<'_> {
                 ),
             ));
         };
-        let name = percent_decode(uri).ok_or_else(|| {
-            MeshError::malformed(
-                self.path,
-                &at,
-                format!("uri '{}' is badly percent-encoded", clip(uri)),
-            )
-        })?;
-        let file: PathBuf = dir.join(&name);
-        map_file(&file).map(BufferData::Mapped).map_err(|e| {
+        let file = match external.resolve(uri, &format!("glTF buffer {index} URI")) {
+            Ok(file) => file,
+            Err(UriError::Url) => {
+                return Err(MeshError::malformed(
+                    self.path,
+                    at,
+                    format!("uri '{}' {URL_REFUSED}", clip(uri)),
+                ))
+            }
+            Err(UriError::BadEscape) => {
+                return Err(MeshError::malformed(
+                    self.path,
+                    &at,
+                    format!("uri '{}' is badly percent-encoded", clip(uri)),
+                ))
+            }
+            Err(UriError::Asset(AssetError::Refused(detail))) => {
+                return Err(MeshError::Refused {
+                    path: self.path.to_path_buf(),
+                    detail,
+                })
+            }
+            Err(UriError::Asset(AssetError::Missing { resolved, cause })) => {
+                return Err(MeshError::malformed(
+                    self.path,
+                    at,
+                    format!(
+                        "cannot read its file '{}' ({}): {cause}",
+                        clip(uri),
+                        resolved.display()
+                    ),
+                ))
+            }
+        };
+        map_regular(&file).map(BufferData::Mapped).map_err(|e| {
             MeshError::malformed(
                 self.path,
                 at,
-                format!("cannot read its file '{name}' ({}): {e}", file.display()),
+                format!(
+                    "cannot read its file '{}' ({}): {e}",
+                    clip(uri),
+                    file.display()
+                ),
             )
         })
     }

@@ -14,7 +14,9 @@
 //!    every draw has them (else the builder computes them all), UVs and colours when any
 //!    draw has them.
 //! 2. **Buffers.** Only the buffers the draws read are opened: the GLB's binary chunk
-//!    and external files memory-mapped, `data:` URIs decoded ([`container`]).
+//!    and external files memory-mapped, `data:` URIs decoded ([`container`]); an external
+//!    file is read only where the asset policy allows it ([`crate::AssetPolicy`]: regular
+//!    files under the input's folder by default), an image's as a buffer's.
 //! 3. **Stream.** Instances are taken mesh by mesh (a mesh's `EXT_meshopt_compression`
 //!    views and `KHR_draco_mesh_compression` primitives ([`draco`]) are decoded once for
 //!    all its instances); each draw delivers its vertices in chunks of [`CHUNK`]
@@ -60,14 +62,17 @@ use std::path::Path;
 use ::gltf::json;
 use json::validation::Checked;
 
+use crate::assets::{folder_of, Assets};
 use crate::common::{finish_report, note_ignored, PolygonEmitter};
+use crate::ReadOptions;
 use crate::{Attributes, ImportReport, MeshError, MeshHeader, MeshVisitor, NO_TEXTURE};
+pub(crate) use container::External;
 use container::{BufferData, Resolver, Views};
 use draco::DracoPrim;
 use material::MaterialUse;
 use scene::Mat4;
 
-pub(crate) use container::GLB_MAGIC;
+pub(crate) use container::{clip, GLB_MAGIC};
 
 /// Vertices (and triangles) decoded per step: big enough that per-chunk costs vanish,
 /// small enough (a few MB of scratch) to keep memory flat.
@@ -89,26 +94,30 @@ const SUPPORTED_REQUIRED: &[&str] = &[
 
 const SUPPORTED_NAMED: usize = 5;
 
-/// Read the `.gltf` or `.glb` file at `path`; external buffers are looked up beside it.
+/// Read the `.gltf` or `.glb` file at `path`; external buffers and images are looked up
+/// beside it, under `options`' policy.
 pub(crate) fn read_gltf(
     path: &Path,
+    options: &ReadOptions,
     visitor: &mut dyn MeshVisitor,
 ) -> Result<ImportReport, MeshError> {
     let map = container::map_file(path).map_err(|e| MeshError::io(path, e))?;
     let bytes: &[u8] = map.as_deref().unwrap_or(&[]);
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
+    let assets = Assets::for_input(&options.assets, path)?;
+    let external = External {
+        dir: folder_of(path),
+        assets: &assets,
     };
-    read_gltf_from(path, bytes, Some(dir), visitor)
+    read_gltf_from(path, bytes, Some(external), visitor)
 }
 
-/// Read a glTF held in `bytes` (a whole `.gltf` or `.glb`); external buffer files are
-/// opened in `base_dir`, or refused when it is `None`. `path` names the file in messages.
+/// Read a glTF held in `bytes` (a whole `.gltf` or `.glb`); external buffer and image
+/// files are resolved by `external`, or refused when it is `None`. `path` names the file
+/// in messages.
 pub(crate) fn read_gltf_from(
     path: &Path,
     bytes: &[u8],
-    base_dir: Option<&Path>,
+    external: Option<External<'_>>,
     visitor: &mut dyn MeshVisitor,
 ) -> Result<ImportReport, MeshError> {
     let parts = container::split(path, bytes)?;
@@ -119,16 +128,16 @@ pub(crate) fn read_gltf_from(
     // Mesh by mesh, so each mesh's compressed views are decoded once for its instances.
     instances.sort_by_key(|i| i.mesh);
     let mut draws = plan(path, &root, &instances, &mut report)?;
-    let mut textures = texture::Textures::new(path, &root, bytes, parts.bin.clone(), base_dir);
+    let mut textures = texture::Textures::new(path, &root, bytes, parts.bin.clone(), external);
     for d in &mut draws {
-        d.texture = textures.of_draw(d, &mut report);
+        d.texture = textures.of_draw(d, &mut report)?;
     }
     textures.warn(&report);
 
     // Open the buffers the draws read.
     let resolver = Resolver {
         path,
-        base_dir,
+        external,
         bin: parts.bin.clone(),
     };
     let mut need: Vec<Option<u64>> = vec![None; root.buffers.len()];

@@ -6,7 +6,7 @@
 //! A `KHR_draco_mesh_compression` primitive goes the same way, its decoded attributes
 //! read like accessors and its Draco faces as a triangle list.
 
-use crate::common::{note_ignored, PolygonEmitter};
+use crate::common::{note_ignored, poll, PolygonEmitter};
 use crate::{Attributes, ImportReport, MeshError, MeshVisitor, Vertex};
 
 use super::accessor::Accessor;
@@ -108,6 +108,8 @@ pub(super) fn emit_draw(
     let count = pos.count;
     let mut start = 0;
     while start < count {
+        // An accessor may claim 3 x 10^9 zeros (no buffer view): Ctrl-C must still work.
+        poll(visitor)?;
         let len = CHUNK.min(count - start);
         pos.read_f32(start, len, 0.0, &mut p);
         if let Some(a) = &normal {
@@ -207,6 +209,7 @@ pub(super) fn emit_draw(
     };
     let mut start = 0;
     while start < corner_count {
+        poll(visitor)?;
         let len = (3 * CHUNK).min(corner_count - start);
         match &indices {
             Some(a) => a.read_indices(start, len, &mut buf),

@@ -13,17 +13,18 @@
 
 use std::collections::HashMap;
 use std::ops::Range;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::Arc;
 
 use ::gltf::json;
 use json::texture::WrappingMode;
 use json::validation::Checked;
 
+use crate::assets::AssetError;
 use crate::image_probe::{probe_bytes, probe_file, probe_file_range, ProbeError};
-use crate::{ImageSource, ImportReport, TextureSource, Wrap, NO_TEXTURE};
+use crate::{ImageSource, ImportReport, MeshError, TextureSource, Wrap, NO_TEXTURE};
 
-use super::container::{clip, decode_data_uri, percent_decode};
+use super::container::{clip, decode_data_uri, External, UriError, URL_REFUSED};
 use super::material::srgb8;
 use super::Draw;
 
@@ -44,6 +45,20 @@ enum ImageUse {
 /// holds it (for messages).
 type Found = (ImageSource, Result<[u32; 2], ProbeError>, String);
 
+/// Why an image in a buffer view has no bytes.
+enum ViewError {
+    /// Its buffer is a file the asset policy refuses: an error (the message).
+    Refused(String),
+    /// Otherwise: the image is unreadable (why).
+    Unreadable(String),
+}
+
+impl From<String> for ViewError {
+    fn from(why: String) -> Self {
+        ViewError::Unreadable(why)
+    }
+}
+
 /// Resolves the textures of an import's draws.
 pub(super) struct Textures<'a> {
     pub path: &'a Path,
@@ -52,8 +67,9 @@ pub(super) struct Textures<'a> {
     pub main: &'a [u8],
     /// The GLB binary chunk within `main`.
     pub bin: Option<Range<usize>>,
-    /// Where external files are looked up (`None`: they are not opened).
-    pub base_dir: Option<&'a Path>,
+    /// Where external files are looked up, under which policy (`None`: they are not
+    /// opened).
+    pub external: Option<External<'a>>,
     /// The texture index of each textured material, once resolved.
     by_material: HashMap<usize, u32>,
     images: HashMap<usize, ImageUse>,
@@ -70,14 +86,14 @@ impl<'a> Textures<'a> {
         root: &'a json::Root,
         main: &'a [u8],
         bin: Option<Range<usize>>,
-        base_dir: Option<&'a Path>,
+        external: Option<External<'a>>,
     ) -> Self {
         Textures {
             path,
             root,
             main,
             bin,
-            base_dir,
+            external,
             by_material: HashMap::new(),
             images: HashMap::new(),
             data_buffers: HashMap::new(),
@@ -87,11 +103,15 @@ impl<'a> Textures<'a> {
     }
 
     /// The texture index draw `d` samples, or [`NO_TEXTURE`] (the reason recorded in
-    /// `report` once).
-    pub(super) fn of_draw(&mut self, d: &Draw, report: &mut ImportReport) -> u32 {
+    /// `report` once); an error when its image is a file the asset policy refuses.
+    pub(super) fn of_draw(
+        &mut self,
+        d: &Draw,
+        report: &mut ImportReport,
+    ) -> Result<u32, MeshError> {
         let u = &d.material;
         let Some(m) = u.index.filter(|_| u.textured) else {
-            return NO_TEXTURE;
+            return Ok(NO_TEXTURE);
         };
         if u.uv_set != 0 {
             self.not_used(
@@ -102,18 +122,18 @@ impl<'a> Textures<'a> {
                 ),
                 report,
             );
-            return NO_TEXTURE;
+            return Ok(NO_TEXTURE);
         }
         if d.uv.is_none() {
             self.not_used(m, &format!("{} has no TEXCOORD_0", d.name), report);
-            return NO_TEXTURE;
+            return Ok(NO_TEXTURE);
         }
         if let Some(&t) = self.by_material.get(&m) {
-            return t;
+            return Ok(t);
         }
-        let t = self.resolve(m, report);
+        let t = self.resolve(m, report)?;
         self.by_material.insert(m, t);
-        t
+        Ok(t)
     }
 
     /// The name of material `m` and its image, as `name (image 'x')`.
@@ -148,12 +168,12 @@ impl<'a> Textures<'a> {
 
     /// The texture of material `m` (used with `TEXCOORD_0`), its source added to
     /// `report.textures` when its image is usable.
-    fn resolve(&mut self, m: usize, report: &mut ImportReport) -> u32 {
+    fn resolve(&mut self, m: usize, report: &mut ImportReport) -> Result<u32, MeshError> {
         let root = self.root;
         let mat = &root.materials[m];
         let pbr = &mat.pbr_metallic_roughness;
         let Some(info) = pbr.base_color_texture.as_ref() else {
-            return NO_TEXTURE;
+            return Ok(NO_TEXTURE);
         };
         let k = info.index.value();
         let Some(tex) = root.textures.get(k) else {
@@ -162,7 +182,7 @@ impl<'a> Textures<'a> {
                 root.textures.len()
             );
             self.not_used(m, &why, report);
-            return NO_TEXTURE;
+            return Ok(NO_TEXTURE);
         };
         let src = tex.source.value();
         if root.images.get(src).is_none() {
@@ -180,12 +200,12 @@ impl<'a> Textures<'a> {
                 ),
             };
             self.not_used(m, &why, report);
-            return NO_TEXTURE;
+            return Ok(NO_TEXTURE);
         }
         let image = match self.images.get(&src) {
             Some(u) => u.clone(),
             None => {
-                let u = self.image(src, report);
+                let u = self.image(src, report)?;
                 self.images.insert(src, u.clone());
                 u
             }
@@ -194,12 +214,12 @@ impl<'a> Textures<'a> {
             ImageUse::Ready(image, size) => (image, size),
             ImageUse::NotUsed(why) => {
                 self.not_used(m, &why, report);
-                return NO_TEXTURE;
+                return Ok(NO_TEXTURE);
             }
-            ImageUse::Missing | ImageUse::Unreadable => return NO_TEXTURE,
+            ImageUse::Missing | ImageUse::Unreadable => return Ok(NO_TEXTURE),
         };
         let Ok(t) = u32::try_from(report.textures.len()) else {
-            return NO_TEXTURE;
+            return Ok(NO_TEXTURE);
         };
         let wrap = tex
             .sampler
@@ -226,11 +246,12 @@ impl<'a> Textures<'a> {
             v_up: false,
             size,
         });
-        t
+        Ok(t)
     }
 
-    /// Find image `src`'s bytes and read its header.
-    fn image(&mut self, src: usize, report: &mut ImportReport) -> ImageUse {
+    /// Find image `src`'s bytes and read its header (an error when they are in a file
+    /// the asset policy refuses).
+    fn image(&mut self, src: usize, report: &mut ImportReport) -> Result<ImageUse, MeshError> {
         let root = self.root;
         let img = &root.images[src];
         let name = image_name(root, src);
@@ -255,7 +276,9 @@ impl<'a> Textures<'a> {
         if let Some(mime) =
             declared.filter(|m| !matches!(m.as_str(), "image/png" | "image/jpeg" | "image/jpg"))
         {
-            return ImageUse::NotUsed(format!("{mime} images are not read (PNG and JPEG are)"));
+            return Ok(ImageUse::NotUsed(format!(
+                "{mime} images are not read (PNG and JPEG are)"
+            )));
         }
         let at = format!("image {src}");
         let (source, probe, shown) = if let Some(uri) = &img.uri {
@@ -263,28 +286,39 @@ impl<'a> Textures<'a> {
                 let bytes: Arc<[u8]> = match decode_data_uri(rest, u64::MAX) {
                     Ok(b) => b.into(),
                     Err(why) => {
-                        return self.unreadable(&name, &format!("bad data URI: {why}"), report)
+                        return Ok(self.unreadable(&name, &format!("bad data URI: {why}"), report))
                     }
                 };
                 let probe = probe_bytes(&bytes);
                 let source = ImageSource::Memory { key: at, bytes };
                 (source, probe, name.clone())
-            } else if uri.contains("://") {
-                return ImageUse::NotUsed(format!(
-                    "uri '{}' is not a relative file name; only files beside the glTF and data: URIs are read",
-                    clip(uri)
-                ));
             } else {
-                let Some(dir) = self.base_dir else {
-                    return ImageUse::NotUsed(format!(
+                let Some(external) = self.external else {
+                    return Ok(ImageUse::NotUsed(format!(
                         "names an external file '{}', which this reader may not open",
                         clip(uri)
-                    ));
+                    )));
                 };
-                let Some(file) = percent_decode(uri) else {
-                    return self.unreadable(&name, "its uri is badly percent-encoded", report);
+                let file = match external.resolve(uri, &format!("glTF image {src} URI")) {
+                    Ok(file) => file,
+                    Err(UriError::Url) => {
+                        return Ok(ImageUse::NotUsed(format!(
+                            "uri '{}' {URL_REFUSED}",
+                            clip(uri)
+                        )))
+                    }
+                    Err(UriError::BadEscape) => {
+                        return Ok(self.unreadable(
+                            &name,
+                            "its uri is badly percent-encoded",
+                            report,
+                        ))
+                    }
+                    Err(UriError::Asset(AssetError::Refused(detail))) => {
+                        return Err(self.refused(detail))
+                    }
+                    Err(UriError::Asset(AssetError::Missing { resolved, .. })) => resolved,
                 };
-                let file: PathBuf = dir.join(file);
                 let probe = probe_file(&file);
                 let shown = file.display().to_string();
                 (ImageSource::File(file), probe, shown)
@@ -292,12 +326,13 @@ impl<'a> Textures<'a> {
         } else if let Some(v) = img.buffer_view {
             match self.view_image(v.value(), &at, &name) {
                 Ok(found) => found,
-                Err(why) => return self.unreadable(&name, &why, report),
+                Err(ViewError::Refused(detail)) => return Err(self.refused(detail)),
+                Err(ViewError::Unreadable(why)) => return Ok(self.unreadable(&name, &why, report)),
             }
         } else {
-            return self.unreadable(&name, "it has neither a uri nor a bufferView", report);
+            return Ok(self.unreadable(&name, "it has neither a uri nor a bufferView", report));
         };
-        match probe {
+        Ok(match probe {
             Ok(size) => ImageUse::Ready(source, size),
             Err(ProbeError::Missing(e)) => {
                 if !report.missing_files.contains(&shown) {
@@ -308,12 +343,19 @@ impl<'a> Textures<'a> {
             }
             Err(e @ ProbeError::Unsupported(_)) => ImageUse::NotUsed(e.to_string()),
             Err(ProbeError::Unreadable(why)) => self.unreadable(&shown, &why, report),
+        })
+    }
+
+    fn refused(&self, detail: String) -> MeshError {
+        MeshError::Refused {
+            path: self.path.to_path_buf(),
+            detail,
         }
     }
 
     /// An image in buffer view `v`: where it is, its header read, and the name of the
     /// file that holds it (for a missing `.bin`).
-    fn view_image(&mut self, v: usize, key: &str, name: &str) -> Result<Found, String> {
+    fn view_image(&mut self, v: usize, key: &str, name: &str) -> Result<Found, ViewError> {
         let root = self.root;
         let view = root
             .buffer_views
@@ -338,7 +380,7 @@ impl<'a> Textures<'a> {
                     format!("buffer {b} has no uri and is not a .glb's binary chunk")
                 })?;
                 if end > bin.len() as u64 {
-                    return Err(beyond(bin.len()));
+                    return Err(beyond(bin.len()).into());
                 }
                 let start = bin.start + offset as usize;
                 let probe = probe_bytes(&self.main[start..start + len as usize]);
@@ -360,7 +402,7 @@ impl<'a> Textures<'a> {
                     })
                     .clone()?;
                 if end > bytes.len() as u64 {
-                    return Err(beyond(bytes.len()));
+                    return Err(beyond(bytes.len()).into());
                 }
                 let bytes: Arc<[u8]> = Arc::from(&bytes[offset as usize..end as usize]);
                 let probe = probe_bytes(&bytes);
@@ -371,19 +413,26 @@ impl<'a> Textures<'a> {
                 Ok((source, probe, name.to_string()))
             }
             Some(uri) => {
-                if uri.contains("://") {
-                    return Err(format!(
-                        "buffer {b}'s uri '{}' is not a relative file name",
-                        clip(uri)
-                    ));
-                }
-                let dir = self.base_dir.ok_or_else(|| {
+                let external = self.external.ok_or_else(|| {
                     format!("buffer {b} names an external file, which this reader may not open")
                 })?;
-                let file = percent_decode(uri).ok_or_else(|| {
-                    format!("buffer {b}'s uri '{}' is badly percent-encoded", clip(uri))
-                })?;
-                let file = dir.join(file);
+                let file = match external.resolve(uri, &format!("glTF buffer {b} URI")) {
+                    Ok(file) => file,
+                    Err(UriError::Url) => {
+                        return Err(format!("buffer {b}'s uri '{}' {URL_REFUSED}", clip(uri)).into())
+                    }
+                    Err(UriError::BadEscape) => {
+                        return Err(format!(
+                            "buffer {b}'s uri '{}' is badly percent-encoded",
+                            clip(uri)
+                        )
+                        .into())
+                    }
+                    Err(UriError::Asset(AssetError::Refused(detail))) => {
+                        return Err(ViewError::Refused(detail))
+                    }
+                    Err(UriError::Asset(AssetError::Missing { resolved, .. })) => resolved,
+                };
                 let probe = probe_file_range(&file, offset, len);
                 let shown = file.display().to_string();
                 let source = ImageSource::FileRange {
