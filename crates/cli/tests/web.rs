@@ -2373,3 +2373,70 @@ fn the_three_js_adapter_geomorphs_so_refinements_do_not_pop() {
         );
     }
 }
+
+/// The browser module as a web developer installs it (issue 28): `npm pack` of web/dist
+/// unpacked into a fresh TypeScript app, type-checked with tsc against the package's
+/// declarations (`Tessera.view`, `View`, `TesseraModel`), bundled with `vite build`
+/// (the .wasm and the decode worker found through `import.meta.url` and emitted as
+/// assets), served by a plain static server and opened in Chromium on the Bunny from
+/// `tessera serve`: the view converges, its patches decoded by the bundled worker
+/// (web/tests/package-app.mjs does the steps).
+#[test]
+fn the_npm_package_works_in_a_vite_app_in_chromium() {
+    let _ = dist();
+    chromium();
+    let tmp = tempfile::tempdir().unwrap();
+    let (models, model) = build_bunny(tmp.path());
+    let (_server, addr) = serve_with(&models, None);
+    let app = tmp.path().join("app");
+    std::fs::create_dir_all(&app).unwrap();
+    let _one = BROWSER.lock().unwrap_or_else(|e| e.into_inner());
+    let out = Command::new("node")
+        .arg(repo().join("web/tests/package-app.mjs"))
+        .arg(format!("http://{addr}/models/bunny.tsr"))
+        .arg(&app)
+        .stderr(Stdio::piped())
+        .output()
+        .expect("node is missing: scripts/setup installs it");
+    assert!(
+        out.status.success(),
+        "package-app.mjs failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let r: Value = serde_json::from_slice(&out.stdout).unwrap();
+    eprintln!("vite app: {} ms, {}", r["ms"], r["stats"]);
+    assert_eq!(
+        r["tsc"], "ok",
+        "the declarations do not type-check: {}",
+        r["tsc"]
+    );
+    let files: Vec<&str> = r["files"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|f| f.as_str())
+        .collect();
+    assert!(files.iter().any(|f| f.ends_with(".wasm")), "{files:?}");
+    assert!(
+        files.iter().any(|f| f.contains("tessera_worker")),
+        "{files:?}"
+    );
+    assert_eq!(r["outcome"], "idle", "{r}");
+    let m = tessera_format::Model::open(&model).unwrap();
+    let roots: u64 = m
+        .nodes()
+        .iter()
+        .filter(|n| n.parent == tessera_format::NO_NODE)
+        .map(|n| u64::from(n.triangle_count))
+        .sum();
+    let s = &r["stats"];
+    assert!(
+        s["triangles"].as_u64().unwrap() > roots,
+        "the view did not refine past the roots ({roots} triangles): {s}"
+    );
+    assert!(s["decode_workers"].as_u64().unwrap() >= 1, "{s}");
+    assert!(
+        s["worker_decoded"].as_u64().unwrap() > 0,
+        "the bundled worker decoded nothing: {s}"
+    );
+}
