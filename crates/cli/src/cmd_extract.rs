@@ -3,10 +3,10 @@
 //! The cut is chosen exactly as every other consumer chooses it (top down, saturated
 //! errors, `tessera_select::select_cut`), or is the uniform cut at one level. The selected
 //! patches are decoded and merged into one indexed mesh by welding bit-identical vertices
-//! (`tessera_select::extract_nodes`: positions share one global grid, so border vertices
+//! (`tessera_extract::extract_nodes`: positions share one global grid, so border vertices
 //! shared by two patches are identical), and written in model coordinates as a binary PLY
-//! (`tessera_select::write_cut_ply`) or as glTF 2.0 (`.glb`, or `.gltf` with its buffer
-//! embedded; `tessera_select::write_cut_gltf`): the extension of `-o` decides. A textured
+//! (`tessera_extract::write_cut_ply`) or as glTF 2.0 (`.glb`, or `.gltf` with its buffer
+//! embedded; `tessera_extract::write_cut_gltf`): the extension of `-o` decides. A textured
 //! model's glTF keeps one primitive per patch with that patch's texture. The edge report
 //! of the welded mesh (boundary and non-manifold edges) is printed: on a closed input any
 //! cut must be a closed manifold, so this doubles as the crack check.
@@ -19,11 +19,11 @@ use anyhow::{bail, Context};
 use serde_json::json;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-use tessera_format::{Grid, PatchReader, ATTR_TEXTURE};
-use tessera_select::{
-    extract_nodes, extract_nodes_keeping, select_cut, uniform_level_cut, write_cut_gltf,
-    write_cut_ply, Camera, Criterion, GltfContainer, GltfContent,
+use tessera_extract::{
+    extract_nodes, extract_nodes_keeping, write_cut_gltf, write_cut_ply, GltfContainer, GltfContent,
 };
+use tessera_format::{Grid, PatchReader, ATTR_TEXTURE};
+use tessera_select::{select_cut, uniform_level_cut, Camera, Criterion};
 
 /// The output formats, for `--help`.
 const OUTPUT_HELP: &str = "\

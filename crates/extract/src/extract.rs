@@ -1,7 +1,7 @@
 //! A chosen cut as one mesh: decode its patches, weld them, count its edges, write it.
 //!
 //! Why it exists: `tessera extract`, exports and tests all want a cut (from
-//! [`select_cut`](crate::select_cut) or [`uniform_level_cut`](crate::uniform_level_cut))
+//! `tessera_select::select_cut` or `tessera_select::uniform_level_cut`)
 //! as a single mesh. The patches are decoded in parallel (rayon) through the format
 //! crate's checked decoder, merged by welding bit-identical vertices
 //! ([`merge_patches`]), and the edge report ([`edge_report`]) of the result is the crack
@@ -13,7 +13,7 @@ use std::path::Path;
 use tessera_format::{FormatError, Grid, NodeRecord, PatchData, PatchReader};
 use tessera_mesh::{Attributes, MeshError, PlyWriter, PlyWriterOptions, Vertex};
 
-use crate::{edge_report, merge_patches, CutMesh, EdgeReport, PatchRef};
+use tessera_select::{edge_report, merge_patches, CutMesh, EdgeReport, PatchRef};
 
 /// A selected, decoded and merged cut.
 pub struct Extracted {

@@ -8,7 +8,7 @@
 //!   with the `min`/`max` glTF requires; `NORMAL` when the model has normals; indices
 //!   `u32`.
 //! - **Untextured** model ([`GltfContent::Welded`]): one primitive, the welded cut of
-//!   [`merge_patches`](crate::merge_patches) (the same mesh the PLY gets), with
+//!   `tessera_select::merge_patches` (the same mesh the PLY gets), with
 //!   `COLOR_0` (`FLOAT` RGBA, linear: Tessera's colour bytes are sRGB like a PLY's,
 //!   glTF's vertex colours are linear, so each byte is decoded exactly; a glTF importer
 //!   that re-encodes them gets the bytes back) when the model has colours, and the
@@ -39,7 +39,7 @@ use base64::Engine as _;
 use json::validation::{Checked::Valid, USize64};
 use tessera_format::{AtomicFile, FormatError, Grid, PatchData, PatchTexture, TextureCodec};
 
-use crate::CutMesh;
+use tessera_select::CutMesh;
 
 /// Which glTF container to write.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
