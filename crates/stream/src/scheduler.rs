@@ -266,6 +266,17 @@ struct NodeFacts {
     texture_size: [u16; 2],
 }
 
+/// What one needed group came to in an upload round ([`Scheduler::frame`]'s step 2).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum GroupStep {
+    /// Uploaded whole.
+    Uploaded,
+    /// Not this round: failed, waiting for members, over a budget, or taken back.
+    Skipped,
+    /// The store is full of groups in use: the less urgent groups wait too.
+    StoreFull,
+}
+
 /// The per-frame policy over one model. See the module docs.
 pub struct Scheduler {
     nv: NodeView,
@@ -1012,221 +1023,21 @@ impl Scheduler {
         let clock = self.opts.clock;
         self.frame += 1;
         let mut stats = FrameStats::default();
+        // 1. Answers in, budgets kept, the cut selected over what is resident.
         self.collect(source);
         let view = self.view_params(camera);
         self.evict_to_budget(Some(&view), store);
         self.morph.set_now(time_s);
-        let ts = clock();
-        self.select_resident_now(&view);
+        self.select_and_look_ahead(camera, &view, time_s, store, &mut stats);
         let draw_before: FxHashSet<u32> = self.sel.draw.iter().copied().collect();
-        stats.cache_misses = self.sel.missing.len();
-        if !self.cut_off.is_empty() {
-            stats.index_wants = self
-                .sel
-                .draw
-                .iter()
-                .filter(|&&n| {
-                    self.cut_off.contains(&n)
-                        && wants_refinement(&self.nv, n, &view, PREFETCH_GROWTH)
-                })
-                .count();
-        }
-        if self.opts.prefetch {
-            let predicted = self.prev_camera.as_ref().map(|(prev, t)| {
-                let dt = (time_s - t).max(0.0);
-                predict_camera(prev, camera, dt, dt * 4.0)
-            });
-            let popts = PrefetchOptions {
-                sphere_growth: PREFETCH_GROWTH,
-                predicted,
-            };
-            prefetch_set(&self.nv, &view, &popts, &mut self.prefetch);
-        } else {
-            self.prefetch.clear();
-        }
-        stats.wanted_bytes = self.wanted_bytes(&view, store);
-        stats.selection_ms = clock() - ts;
-
-        // Upload finished groups, most urgent first, within the byte budget; then select
-        // again, since uploaded groups make their children wanted, which the source may
-        // already have delivered (prefetched). A few rounds per frame, never waiting.
-        let mut budget = self.opts.upload_budget_bytes;
+        // 2. Finished groups uploaded, most urgent first, re-selecting as they land.
         let mut wanted: Vec<(u32, f32)> = Vec::new();
-        let mut stale = false;
-        // RAM the groups asked for take once complete: only groups that fit in RAM
-        // together are asked for (see below).
-        let ram_budget = self.ram.budget();
-        let mut planned = 0u64;
-        for round in 0..MAX_UPLOAD_ROUNDS {
-            let ts = clock();
-            if round > 0 {
-                self.select_resident_now(&view);
-            }
-            self.touch_draw_set();
-            let needed = self.needed_groups();
-            stats.selection_ms += clock() - ts;
-            wanted.clear();
-            planned = 0;
-            let uploads_before = stats.patches_uploaded;
-            // Hysteresis: evict first what even a view with spheres grown by
-            // UNLOAD_GROWTH (more than the prefetch growth) would not need.
-            let (nv, groups, frame) = (&self.nv, &self.groups, self.frame);
-            let unloadable = |h: u32| {
-                groups
-                    .members(h)
-                    .iter()
-                    .all(|&x| should_unload(nv, x, &view, UNLOAD_GROWTH))
-            };
-            stats.budget_limited = 0;
-            for (i, &(g, pri)) in needed.iter().enumerate() {
-                if group_failed(groups, &self.failed, g) {
-                    continue;
-                }
-                // A group is assembled in RAM (decoded) before its upload. Groups are
-                // asked for, most urgent first, only while they fit in the RAM budget
-                // together: more would not all fit, so arrivals would be refused or
-                // evict each other's patches, to be fetched again and again while none
-                // completes. One that does not fit beside the more urgent ones is not
-                // asked for and its patches in RAM are not touched (they make room).
-                let group_ram: u64 = groups
-                    .members(g)
-                    .iter()
-                    .filter(|&&m| !self.res.resident[m as usize])
-                    .map(|&m| {
-                        self.ram
-                            .bytes_of(m)
-                            .unwrap_or_else(|| estimate_decoded(&self.facts[m as usize]))
-                    })
-                    .sum();
-                if planned > 0 && planned + group_ram > ram_budget {
-                    stats.budget_limited += 1;
-                    continue;
-                }
-                planned += group_ram;
-                let mut patches: Vec<(u32, Arc<PatchData>)> = Vec::new();
-                let mut all = true;
-                for &m in groups.members(g) {
-                    if self.res.resident[m as usize] {
-                        continue;
-                    }
-                    // A use: patches of a group still waiting for siblings stay in RAM.
-                    match self.ram.touch(m, frame) {
-                        Some(p) => patches.push((m, p.clone())),
-                        None => {
-                            all = false;
-                            wanted.push((m, VISIBLE_PRIORITY + pri));
-                        }
-                    }
-                }
-                let size: u64 = patches.iter().map(|(_, p)| store.bytes_for(p)).sum();
-                if !all || (size > budget && stats.patches_uploaded > 0) {
-                    continue;
-                }
-                // A group is uploaded whole or not at all: room for all of it first (a
-                // partly uploaded group is unusable, unused, so evicted next frame,
-                // then uploaded again: churn), within the budget and the store. One
-                // larger than the whole budget is skipped (a shared budget may grow).
-                if size > self.res.lru.budget() {
-                    stats.budget_limited += 1;
-                    continue;
-                }
-                let refs: Vec<&PatchData> = patches.iter().map(|(_, p)| p.as_ref()).collect();
-                let mut room = true;
-                while room && (self.res.lru.would_exceed(size) || !store.has_room(&refs)) {
-                    room = self.res.evict_one(groups, store, frame, &unloadable);
-                }
-                if !room {
-                    // Full of groups in use: the less urgent groups after this one
-                    // wait too, or they would take the room this one waits for (a
-                    // budget that grows, in a scene, would fill with whatever is
-                    // small instead of what matters most). At most this group's bytes
-                    // stay unused.
-                    stats.budget_limited += needed.len() - i;
-                    break;
-                }
-                let mut whole = true;
-                for (m, p) in &patches {
-                    let key = (*m, g, nv.nodes()[*m as usize].parent == NO_NODE);
-                    let what = (p.as_ref(), refs.as_slice());
-                    match self
-                        .res
-                        .upload(groups, store, frame, key, what, &unloadable)
-                    {
-                        Ok(b) => {
-                            budget -= b.min(budget);
-                            stats.bytes_uploaded += b;
-                            stats.patches_uploaded += 1;
-                        }
-                        Err(StoreError::Full) => {
-                            whole = false;
-                            break;
-                        }
-                        Err(StoreError::TooBig) => {
-                            tracing::warn!(node = m, "patch larger than the store, skipped");
-                            self.failed.insert(*m);
-                        }
-                    }
-                }
-                if !whole {
-                    // The store was full after all (fragmentation): take the part back.
-                    self.res.evict_group(groups, store, g);
-                    continue;
-                }
-                // Keep the group from being evicted by later uploads of this frame.
-                self.res.lru.touch(g, frame);
-            }
-            stale = stats.patches_uploaded > uploads_before;
-            if !stale {
-                break;
-            }
-        }
-        if stale {
-            // The last round uploaded: draw what it made usable.
-            let ts = clock();
-            self.select_resident_now(&view);
-            self.touch_draw_set();
-            stats.selection_ms += clock() - ts;
-        }
+        let planned = self.upload_rounds(&view, store, &mut wanted, &mut stats);
         if !self.blocked.is_empty() {
             self.want_demand(&mut wanted);
         }
-        // Prefetch: lower priorities than anything visible, in the RAM the visible
-        // groups leave (as above: a prefetch set larger than that would evict itself,
-        // fetched again and again). The most urgent first when not all of it fits.
-        let (res, ram, failed, facts) = (&self.res, &self.ram, &self.failed, &self.facts);
-        let mut fresh: Vec<(u32, f32, u64)> = self
-            .prefetch
-            .iter()
-            .filter(|&&(n, _)| !res.resident[n as usize] && !failed.contains(&n))
-            .map(|&(n, pri)| {
-                let held = ram.bytes_of(n);
-                (
-                    n,
-                    pri,
-                    held.unwrap_or_else(|| estimate_decoded(&facts[n as usize])),
-                )
-            })
-            .collect();
-        // None while the view needs more than the store holds: its own cut comes
-        // first (prefetched patches would only take the RAM its groups need).
-        let room = if stats.wanted_bytes > self.res.lru.budget() {
-            0
-        } else {
-            ram_budget.saturating_sub(planned)
-        };
-        if fresh.iter().map(|f| f.2).sum::<u64>() > room {
-            fresh.sort_by(|a, b| b.1.total_cmp(&a.1));
-            let mut taken = 0u64;
-            fresh.retain(|f| {
-                taken += f.2;
-                taken <= room
-            });
-        }
-        for (n, pri, _) in fresh {
-            if !ram.contains(n) {
-                wanted.push((n, pri.min(PREFETCH_PRIORITY_MAX)));
-            }
-        }
+        // 3. The prefetch set in the RAM the visible groups leave; the wants sent.
+        self.want_prefetch(&stats, planned, &mut wanted);
         source.request(&wanted);
         let hint: Vec<u32> = self
             .prefetch
@@ -1235,6 +1046,7 @@ impl Scheduler {
             .filter(|&n| !self.ram.contains(n))
             .collect();
         source.hint(&hint);
+        // 4. The morph ratios of the final cut and the frame's figures.
         stats.pending_loads = source.pending();
         stats.cache_hits = self
             .sel
@@ -1249,6 +1061,270 @@ impl Scheduler {
         self.prev_camera = Some((camera.clone(), time_s));
         self.finish_stats(&mut stats, store);
         stats
+    }
+
+    /// Step 1 of [`Scheduler::frame`]: the cut over what is resident, its misses, the
+    /// detail the index does not show yet ([`FrameStats::index_wants`]), the prefetch set
+    /// (grown spheres and the camera predicted from the last frame's) and the view's
+    /// demand ([`FrameStats::wanted_bytes`]).
+    fn select_and_look_ahead<R: ResidentStore + ?Sized>(
+        &mut self,
+        camera: &Camera,
+        view: &ViewParams,
+        time_s: f64,
+        store: &R,
+        stats: &mut FrameStats,
+    ) {
+        let clock = self.opts.clock;
+        let ts = clock();
+        self.select_resident_now(view);
+        stats.cache_misses = self.sel.missing.len();
+        if !self.cut_off.is_empty() {
+            stats.index_wants = self
+                .sel
+                .draw
+                .iter()
+                .filter(|&&n| {
+                    self.cut_off.contains(&n)
+                        && wants_refinement(&self.nv, n, view, PREFETCH_GROWTH)
+                })
+                .count();
+        }
+        if self.opts.prefetch {
+            let predicted = self.prev_camera.as_ref().map(|(prev, t)| {
+                let dt = (time_s - t).max(0.0);
+                predict_camera(prev, camera, dt, dt * 4.0)
+            });
+            let popts = PrefetchOptions {
+                sphere_growth: PREFETCH_GROWTH,
+                predicted,
+            };
+            prefetch_set(&self.nv, view, &popts, &mut self.prefetch);
+        } else {
+            self.prefetch.clear();
+        }
+        stats.wanted_bytes = self.wanted_bytes(view, store);
+        stats.selection_ms = clock() - ts;
+    }
+
+    /// Step 2 of [`Scheduler::frame`]: finished groups uploaded, most urgent first,
+    /// within the byte budget; then the cut selected again, since uploaded groups make
+    /// their children wanted, which the source may already have delivered (prefetched).
+    /// A few rounds per frame ([`MAX_UPLOAD_ROUNDS`]), never waiting. The missing
+    /// members of the needed groups go into `wanted`; returns the RAM the groups asked
+    /// for take once complete (only groups that fit in RAM together are asked for).
+    fn upload_rounds<R: ResidentStore + ?Sized>(
+        &mut self,
+        view: &ViewParams,
+        store: &mut R,
+        wanted: &mut Vec<(u32, f32)>,
+        stats: &mut FrameStats,
+    ) -> u64 {
+        let clock = self.opts.clock;
+        let mut budget = self.opts.upload_budget_bytes;
+        let mut stale = false;
+        let mut planned = 0u64;
+        for round in 0..MAX_UPLOAD_ROUNDS {
+            let ts = clock();
+            if round > 0 {
+                self.select_resident_now(view);
+            }
+            self.touch_draw_set();
+            let needed = self.needed_groups();
+            stats.selection_ms += clock() - ts;
+            wanted.clear();
+            planned = 0;
+            let uploads_before = stats.patches_uploaded;
+            stats.budget_limited = 0;
+            for (i, &(g, pri)) in needed.iter().enumerate() {
+                let step = self.upload_group(
+                    view,
+                    store,
+                    (g, pri),
+                    &mut budget,
+                    &mut planned,
+                    wanted,
+                    stats,
+                );
+                if step == GroupStep::StoreFull {
+                    // Full of groups in use: the less urgent groups after this one
+                    // wait too, or they would take the room this one waits for (a
+                    // budget that grows, in a scene, would fill with whatever is
+                    // small instead of what matters most). At most this group's bytes
+                    // stay unused.
+                    stats.budget_limited += needed.len() - i;
+                    break;
+                }
+            }
+            stale = stats.patches_uploaded > uploads_before;
+            if !stale {
+                break;
+            }
+        }
+        if stale {
+            // The last round uploaded: draw what it made usable.
+            let ts = clock();
+            self.select_resident_now(view);
+            self.touch_draw_set();
+            stats.selection_ms += clock() - ts;
+        }
+        planned
+    }
+
+    /// One needed group `(g, pri)` of an upload round: asked for (its missing members
+    /// into `wanted`) if it fits in RAM beside the more urgent ones (`planned`), and
+    /// uploaded whole when all its members are in RAM and the frame's upload `budget`
+    /// and the store allow it.
+    #[allow(clippy::too_many_arguments)]
+    fn upload_group<R: ResidentStore + ?Sized>(
+        &mut self,
+        view: &ViewParams,
+        store: &mut R,
+        (g, pri): (u32, f32),
+        budget: &mut u64,
+        planned: &mut u64,
+        wanted: &mut Vec<(u32, f32)>,
+        stats: &mut FrameStats,
+    ) -> GroupStep {
+        let (nv, groups, frame) = (&self.nv, &self.groups, self.frame);
+        if group_failed(groups, &self.failed, g) {
+            return GroupStep::Skipped;
+        }
+        // Hysteresis: evict first what even a view with spheres grown by
+        // UNLOAD_GROWTH (more than the prefetch growth) would not need.
+        let unloadable = |h: u32| {
+            groups
+                .members(h)
+                .iter()
+                .all(|&x| should_unload(nv, x, view, UNLOAD_GROWTH))
+        };
+        // A group is assembled in RAM (decoded) before its upload. Groups are asked
+        // for, most urgent first, only while they fit in the RAM budget together: more
+        // would not all fit, so arrivals would be refused or evict each other's
+        // patches, to be fetched again and again while none completes. One that does
+        // not fit beside the more urgent ones is not asked for and its patches in RAM
+        // are not touched (they make room).
+        let group_ram: u64 = groups
+            .members(g)
+            .iter()
+            .filter(|&&m| !self.res.resident[m as usize])
+            .map(|&m| {
+                self.ram
+                    .bytes_of(m)
+                    .unwrap_or_else(|| estimate_decoded(&self.facts[m as usize]))
+            })
+            .sum();
+        if *planned > 0 && *planned + group_ram > self.ram.budget() {
+            stats.budget_limited += 1;
+            return GroupStep::Skipped;
+        }
+        *planned += group_ram;
+        let mut patches: Vec<(u32, Arc<PatchData>)> = Vec::new();
+        let mut all = true;
+        for &m in groups.members(g) {
+            if self.res.resident[m as usize] {
+                continue;
+            }
+            // A use: patches of a group still waiting for siblings stay in RAM.
+            match self.ram.touch(m, frame) {
+                Some(p) => patches.push((m, p.clone())),
+                None => {
+                    all = false;
+                    wanted.push((m, VISIBLE_PRIORITY + pri));
+                }
+            }
+        }
+        let size: u64 = patches.iter().map(|(_, p)| store.bytes_for(p)).sum();
+        if !all || (size > *budget && stats.patches_uploaded > 0) {
+            return GroupStep::Skipped;
+        }
+        // A group is uploaded whole or not at all: room for all of it first (a partly
+        // uploaded group is unusable, unused, so evicted next frame, then uploaded
+        // again: churn), within the budget and the store. One larger than the whole
+        // budget is skipped (a shared budget may grow).
+        if size > self.res.lru.budget() {
+            stats.budget_limited += 1;
+            return GroupStep::Skipped;
+        }
+        let refs: Vec<&PatchData> = patches.iter().map(|(_, p)| p.as_ref()).collect();
+        let mut room = true;
+        while room && (self.res.lru.would_exceed(size) || !store.has_room(&refs)) {
+            room = self.res.evict_one(groups, store, frame, &unloadable);
+        }
+        if !room {
+            return GroupStep::StoreFull;
+        }
+        let mut whole = true;
+        for (m, p) in &patches {
+            let key = (*m, g, nv.nodes()[*m as usize].parent == NO_NODE);
+            let what = (p.as_ref(), refs.as_slice());
+            match self
+                .res
+                .upload(groups, store, frame, key, what, &unloadable)
+            {
+                Ok(b) => {
+                    *budget -= b.min(*budget);
+                    stats.bytes_uploaded += b;
+                    stats.patches_uploaded += 1;
+                }
+                Err(StoreError::Full) => {
+                    whole = false;
+                    break;
+                }
+                Err(StoreError::TooBig) => {
+                    tracing::warn!(node = m, "patch larger than the store, skipped");
+                    self.failed.insert(*m);
+                }
+            }
+        }
+        if !whole {
+            // The store was full after all (fragmentation): take the part back.
+            self.res.evict_group(groups, store, g);
+            return GroupStep::Skipped;
+        }
+        // Keep the group from being evicted by later uploads of this frame.
+        self.res.lru.touch(g, frame);
+        GroupStep::Uploaded
+    }
+
+    /// Step 3 of [`Scheduler::frame`]: the prefetch set into `wanted`, at priorities
+    /// below anything visible, in the RAM the visible groups leave (`planned` taken: a
+    /// prefetch set larger than that would evict itself, fetched again and again), the
+    /// most urgent first when not all of it fits; none while the view needs more than
+    /// the store holds (its own cut comes first).
+    fn want_prefetch(&self, stats: &FrameStats, planned: u64, wanted: &mut Vec<(u32, f32)>) {
+        let (res, ram, failed, facts) = (&self.res, &self.ram, &self.failed, &self.facts);
+        let mut fresh: Vec<(u32, f32, u64)> = self
+            .prefetch
+            .iter()
+            .filter(|&&(n, _)| !res.resident[n as usize] && !failed.contains(&n))
+            .map(|&(n, pri)| {
+                let held = ram.bytes_of(n);
+                (
+                    n,
+                    pri,
+                    held.unwrap_or_else(|| estimate_decoded(&facts[n as usize])),
+                )
+            })
+            .collect();
+        let room = if stats.wanted_bytes > self.res.lru.budget() {
+            0
+        } else {
+            ram.budget().saturating_sub(planned)
+        };
+        if fresh.iter().map(|f| f.2).sum::<u64>() > room {
+            fresh.sort_by(|a, b| b.1.total_cmp(&a.1));
+            let mut taken = 0u64;
+            fresh.retain(|f| {
+                taken += f.2;
+                taken <= room
+            });
+        }
+        for (n, pri, _) in fresh {
+            if !ram.contains(n) {
+                wanted.push((n, pri.min(PREFETCH_PRIORITY_MAX)));
+            }
+        }
     }
 
     /// One complete or full-resolution frame (see the module docs): the whole cut is
