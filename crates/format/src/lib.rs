@@ -38,9 +38,10 @@ pub use atomic::{AtomicFile, AtomicFileError};
 pub use codec::texels;
 pub use codec::{
     chart_plane_at, chart_plane_uv, decode_patch, decode_patch_with, encode_patch, oct_decode,
-    oct_encode, stored_uv, PatchData, PatchShape, PatchTexture, TextureChart, TextureCodec,
-    BC7_ZSTD_LEVEL, MAX_PATCH_CHARTS, MAX_PATCH_TRIANGLES, MAX_PATCH_VERTICES, PATCH_CODEC_VERSION,
-    PATCH_FLAG_MORPH, PATCH_FLAG_ZSTD, PATCH_HEADER_BYTES, RECUT_IMAGE, UV_FRACTION_BITS,
+    oct_encode, stored_uv, PatchData, PatchHeader, PatchShape, PatchTexture, TextureChart,
+    TextureCodec, BC7_ZSTD_LEVEL, MAX_PATCH_CHARTS, MAX_PATCH_TRIANGLES, MAX_PATCH_VERTICES,
+    PATCH_CODEC_VERSION, PATCH_FLAG_MORPH, PATCH_FLAG_ZSTD, PATCH_HEADER_BYTES, RECUT_IMAGE,
+    UV_FRACTION_BITS,
 };
 pub use drawing::{
     morph_targets, patch_is_textured, patch_texel_size, source_uv, texel_lod, vertex_chart,

@@ -754,6 +754,159 @@ impl From<&NodeRecord> for PatchShape {
     }
 }
 
+/// A patch's 48-byte header (`docs/format.md`, "Patch encoding"), read and checked
+/// against the model's attribute bits and the node record's shape: every length
+/// plausible for the counts, the sections summing to the payload, the texture block
+/// fitting the patch. What [`decode_patch_with`] decodes the payload by.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PatchHeader {
+    pub vertex_count: u32,
+    pub triangle_count: u32,
+    /// The payload is one zstd frame (flag bit 0).
+    pub zstd: bool,
+    /// Morph targets are present (flag bit 1).
+    pub morph: bool,
+    /// Length of the uncompressed payload (the sections' lengths summed).
+    pub raw_len: u64,
+    /// Uncompressed length of each section, 0 if absent.
+    pub section_len: [u64; SECTION_COUNT],
+    /// End of the stored payload in the patch's bytes: the texture block follows.
+    pub payload_end: usize,
+}
+
+impl PatchHeader {
+    /// Reads and checks the header of the patch `bytes` of a model with `attributes`
+    /// for the node record's `shape`; every inconsistency is a
+    /// [`FormatError::CorruptPatch`].
+    pub fn parse(
+        bytes: &[u8],
+        attributes: u32,
+        shape: PatchShape,
+    ) -> Result<PatchHeader, FormatError> {
+        let PatchShape {
+            vertex_count,
+            triangle_count,
+            texture_size,
+            ..
+        } = shape;
+        if bytes.len() < PATCH_HEADER_BYTES {
+            return Err(corrupt(format!(
+                "{} bytes, shorter than the {PATCH_HEADER_BYTES}-byte patch header",
+                bytes.len()
+            )));
+        }
+        let n = le_u32(bytes, 0);
+        let t = le_u32(bytes, 4);
+        let version = bytes[8];
+        let flags = bytes[9];
+        let attrs = bytes[10] as u32;
+        let reserved = bytes[11];
+        let raw_len = le_u32(bytes, 12) as u64;
+        let lens: [u64; SECTION_COUNT] = std::array::from_fn(|k| le_u32(bytes, 16 + 4 * k) as u64);
+        let texture_bytes = le_u32(bytes, 16 + 4 * SECTION_COUNT as usize) as usize;
+
+        if version != PATCH_CODEC_VERSION {
+            return Err(corrupt(format!("unknown patch codec version {version}")));
+        }
+        if flags & !(PATCH_FLAG_ZSTD | PATCH_FLAG_MORPH) != 0 || reserved != 0 {
+            return Err(corrupt(format!(
+                "unknown patch flags {flags:#x}/{reserved:#x}"
+            )));
+        }
+        if attrs != attributes {
+            return Err(corrupt(format!(
+                "patch attributes {attrs:#x} differ from the model's {attributes:#x}"
+            )));
+        }
+        if n != vertex_count || t != triangle_count {
+            return Err(corrupt(format!(
+                "patch has {n} vertices / {t} triangles, node record says {vertex_count} / {triangle_count}"
+            )));
+        }
+        if n > MAX_PATCH_VERTICES || t > MAX_PATCH_TRIANGLES {
+            return Err(corrupt(format!(
+                "too many vertices ({n}) or triangles ({t})"
+            )));
+        }
+        if n == 0 && t > 0 {
+            return Err(corrupt("triangles without vertices"));
+        }
+        let morph = flags & PATCH_FLAG_MORPH != 0;
+        let textured = attributes & ATTR_TEXTURE != 0;
+        if textured && attributes & ATTR_UVS == 0 {
+            return Err(corrupt("textures without UVs"));
+        }
+        let wants_texture = textured && n > 0;
+        if wants_texture != (texture_bytes > 0) {
+            return Err(corrupt(format!(
+                "texture block of {texture_bytes} bytes in a patch that {} one",
+                if wants_texture {
+                    "needs"
+                } else {
+                    "has no use for"
+                }
+            )));
+        }
+        if (texture_size != [0, 0]) != wants_texture {
+            return Err(corrupt(format!(
+                "node record's texture size {texture_size:?} does not fit the patch"
+            )));
+        }
+        let n64 = n as u64;
+        let present = |on: bool, size: u64| if on && n > 0 { Some(size) } else { None };
+        let expected: [Option<u64>; SECTION_COUNT] = [
+            if t > 0 { Some(0) } else { None },
+            present(true, 12),
+            present(attributes & ATTR_NORMALS != 0, 4),
+            present(attributes & ATTR_COLORS != 0, 4),
+            present(attributes & ATTR_UVS != 0, 8),
+            present(morph, 12),
+            present(textured, 0),
+        ];
+        let mut sum = 0u64;
+        for (k, (&len, exp)) in lens.iter().zip(expected).enumerate() {
+            let bound = match exp {
+                None => 0,
+                Some(_) if k == SEC_INDICES => index_section_bound(t as u64),
+                Some(_) if k == SEC_MORPH => 4 + 5 * n64 + vertex_section_bound(n64, 12),
+                Some(_) if k == SEC_CHARTS => {
+                    4 + ((CHART_BYTES + PLANE_BYTES) * MAX_PATCH_CHARTS) as u64 + 2 * n64
+                }
+                Some(size) => vertex_section_bound(n64, size),
+            };
+            if exp.is_some() && len == 0 || len > bound {
+                return Err(corrupt(format!("section {k} has implausible length {len}")));
+            }
+            sum += len;
+        }
+        if sum != raw_len {
+            return Err(corrupt(format!(
+                "section lengths sum to {sum}, header says {raw_len}"
+            )));
+        }
+
+        let Some(payload_end) = bytes
+            .len()
+            .checked_sub(texture_bytes)
+            .filter(|&e| e >= PATCH_HEADER_BYTES)
+        else {
+            return Err(corrupt(format!(
+                "texture block of {texture_bytes} bytes does not fit a {}-byte patch",
+                bytes.len()
+            )));
+        };
+        Ok(PatchHeader {
+            vertex_count: n,
+            triangle_count: t,
+            zstd: flags & PATCH_FLAG_ZSTD != 0,
+            morph,
+            raw_len,
+            section_len: lens,
+            payload_end,
+        })
+    }
+}
+
 /// Decodes a patch produced by [`encode_patch`]. `attributes` are the model's `ATTR_*`
 /// bits; `shape` comes from the node record and must match the patch. Safe on
 /// arbitrary bytes: every inconsistency is a [`FormatError::CorruptPatch`] (with node
@@ -775,120 +928,23 @@ pub fn decode_patch_with(
     shape: PatchShape,
     texels: bool,
 ) -> Result<PatchData, FormatError> {
+    let PatchHeader {
+        vertex_count: n,
+        triangle_count: t,
+        zstd,
+        morph,
+        raw_len,
+        section_len: lens,
+        payload_end,
+    } = PatchHeader::parse(bytes, attributes, shape)?;
     let PatchShape {
         quant_min,
-        vertex_count,
-        triangle_count,
         texture_size,
+        ..
     } = shape;
-    if bytes.len() < PATCH_HEADER_BYTES {
-        return Err(corrupt(format!(
-            "{} bytes, shorter than the {PATCH_HEADER_BYTES}-byte patch header",
-            bytes.len()
-        )));
-    }
-    let n = le_u32(bytes, 0);
-    let t = le_u32(bytes, 4);
-    let version = bytes[8];
-    let flags = bytes[9];
-    let attrs = bytes[10] as u32;
-    let reserved = bytes[11];
-    let raw_len = le_u32(bytes, 12) as u64;
-    let lens: [u64; SECTION_COUNT] = std::array::from_fn(|k| le_u32(bytes, 16 + 4 * k) as u64);
-    let texture_bytes = le_u32(bytes, 16 + 4 * SECTION_COUNT as usize) as usize;
-
-    if version != PATCH_CODEC_VERSION {
-        return Err(corrupt(format!("unknown patch codec version {version}")));
-    }
-    if flags & !(PATCH_FLAG_ZSTD | PATCH_FLAG_MORPH) != 0 || reserved != 0 {
-        return Err(corrupt(format!(
-            "unknown patch flags {flags:#x}/{reserved:#x}"
-        )));
-    }
-    if attrs != attributes {
-        return Err(corrupt(format!(
-            "patch attributes {attrs:#x} differ from the model's {attributes:#x}"
-        )));
-    }
-    if n != vertex_count || t != triangle_count {
-        return Err(corrupt(format!(
-            "patch has {n} vertices / {t} triangles, node record says {vertex_count} / {triangle_count}"
-        )));
-    }
-    if n > MAX_PATCH_VERTICES || t > MAX_PATCH_TRIANGLES {
-        return Err(corrupt(format!(
-            "too many vertices ({n}) or triangles ({t})"
-        )));
-    }
-    if n == 0 && t > 0 {
-        return Err(corrupt("triangles without vertices"));
-    }
-    let morph = flags & PATCH_FLAG_MORPH != 0;
     let textured = attributes & ATTR_TEXTURE != 0;
-    if textured && attributes & ATTR_UVS == 0 {
-        return Err(corrupt("textures without UVs"));
-    }
-    let wants_texture = textured && n > 0;
-    if wants_texture != (texture_bytes > 0) {
-        return Err(corrupt(format!(
-            "texture block of {texture_bytes} bytes in a patch that {} one",
-            if wants_texture {
-                "needs"
-            } else {
-                "has no use for"
-            }
-        )));
-    }
-    if (texture_size != [0, 0]) != wants_texture {
-        return Err(corrupt(format!(
-            "node record's texture size {texture_size:?} does not fit the patch"
-        )));
-    }
-    let n64 = n as u64;
-    let present = |on: bool, size: u64| if on && n > 0 { Some(size) } else { None };
-    let expected: [Option<u64>; SECTION_COUNT] = [
-        if t > 0 { Some(0) } else { None },
-        present(true, 12),
-        present(attributes & ATTR_NORMALS != 0, 4),
-        present(attributes & ATTR_COLORS != 0, 4),
-        present(attributes & ATTR_UVS != 0, 8),
-        present(morph, 12),
-        present(textured, 0),
-    ];
-    let mut sum = 0u64;
-    for (k, (&len, exp)) in lens.iter().zip(expected).enumerate() {
-        let bound = match exp {
-            None => 0,
-            Some(_) if k == SEC_INDICES => index_section_bound(t as u64),
-            Some(_) if k == SEC_MORPH => 4 + 5 * n64 + vertex_section_bound(n64, 12),
-            Some(_) if k == SEC_CHARTS => {
-                4 + ((CHART_BYTES + PLANE_BYTES) * MAX_PATCH_CHARTS) as u64 + 2 * n64
-            }
-            Some(size) => vertex_section_bound(n64, size),
-        };
-        if exp.is_some() && len == 0 || len > bound {
-            return Err(corrupt(format!("section {k} has implausible length {len}")));
-        }
-        sum += len;
-    }
-    if sum != raw_len {
-        return Err(corrupt(format!(
-            "section lengths sum to {sum}, header says {raw_len}"
-        )));
-    }
-
-    let Some(payload_end) = bytes
-        .len()
-        .checked_sub(texture_bytes)
-        .filter(|&e| e >= PATCH_HEADER_BYTES)
-    else {
-        return Err(corrupt(format!(
-            "texture block of {texture_bytes} bytes does not fit a {}-byte patch",
-            bytes.len()
-        )));
-    };
     let stored = &bytes[PATCH_HEADER_BYTES..payload_end];
-    let payload: Cow<[u8]> = if flags & PATCH_FLAG_ZSTD != 0 {
+    let payload: Cow<[u8]> = if zstd {
         let out =
             zstd_decompress(stored, raw_len as usize).map_err(|e| corrupt(format!("zstd: {e}")))?;
         Cow::Owned(out)
