@@ -1,6 +1,6 @@
 //! End-to-end pager tests on a real model file built in a temp dir.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::{Arc, OnceLock};
 use std::time::{Duration, Instant};
 
@@ -10,34 +10,23 @@ use tessera_stream::{Answer, PatchSource};
 
 /// Builds the shared test model once per test binary.
 fn model_path() -> &'static Path {
-    static DIR: OnceLock<(tempfile::TempDir, PathBuf)> = OnceLock::new();
-    &DIR.get_or_init(|| {
-        let dir = tempfile::tempdir().unwrap();
-        let ply = dir.path().join("sphere.ply");
-        let tsr = dir.path().join("sphere.tsr");
-        tessera_gen::write_sphere(
-            &ply,
-            &tessera_gen::SphereOptions {
-                triangles: 50_000,
-                ..Default::default()
-            },
-            &tessera_gen::NoProgress,
-        )
-        .unwrap();
-        tessera_build::build(
-            &ply,
-            &tsr,
-            &tessera_build::BuildOptions {
-                leaf_triangles: 400,
-                node_triangles: 200,
-                ..Default::default()
-            },
-            &tessera_build::NoProgress,
-        )
-        .unwrap();
-        (dir, tsr)
-    })
-    .1
+    static MODEL: OnceLock<tessera_testkit::TestModel> = OnceLock::new();
+    &MODEL
+        .get_or_init(|| {
+            tessera_testkit::build_model(
+                None,
+                &tessera_gen::SphereOptions {
+                    triangles: 50_000,
+                    ..Default::default()
+                },
+                &tessera_build::BuildOptions {
+                    leaf_triangles: 400,
+                    node_triangles: 200,
+                    ..Default::default()
+                },
+            )
+        })
+        .path
 }
 
 fn open() -> Arc<Model> {

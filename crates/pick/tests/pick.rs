@@ -23,7 +23,7 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 use glam::DVec3;
-use tessera_build::{BuildOptions, NoProgress};
+use tessera_build::BuildOptions;
 use tessera_format::{FormatError, Grid, Model, ModelIndex, PatchData, PatchReader, NO_NODE};
 use tessera_mesh::{MeshError, MeshHeader, MeshVisitor, Vertex};
 use tessera_pick::{pick, pick_resident, pick_with, Hit, PickOptions, PickStats, Ray};
@@ -32,26 +32,10 @@ use tessera_select::{Camera, Orbit};
 // ---------------------------------------------------------------- models and meshes
 
 fn data(name: &str) -> PathBuf {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../../shared/data")
-        .join(name);
-    assert!(
-        p.exists(),
-        "{} is missing: these tests need the real scans in ../shared/data beside the repository (CI has them)",
-        p.display()
-    );
-    p
+    tessera_testkit::shared_data(name)
 }
 
-fn small_options() -> BuildOptions {
-    BuildOptions {
-        memory_bytes: 256 << 20,
-        threads: Some(2),
-        leaf_triangles: 400,
-        node_triangles: 200,
-        ..BuildOptions::default()
-    }
-}
+use tessera_testkit::small_options;
 
 struct Built {
     _dir: tempfile::TempDir,
@@ -61,32 +45,12 @@ struct Built {
 }
 
 fn build(input: Option<&Path>, opts: &BuildOptions) -> Built {
-    let dir = tempfile::tempdir().expect("tempdir");
-    let input = match input {
-        Some(p) => p.to_owned(),
-        None => {
-            let p = dir.path().join("sphere.ply");
-            tessera_gen::write_sphere(
-                &p,
-                &tessera_gen::SphereOptions {
-                    triangles: 50_000,
-                    seed: 7,
-                    colors: false,
-                    noise: 0.05,
-                },
-                &tessera_gen::NoProgress,
-            )
-            .expect("generate sphere");
-            p
-        }
-    };
-    let path = dir.path().join("model.tsr");
-    tessera_build::build(&input, &path, opts, &NoProgress).expect("build");
-    let model = Model::open(&path).expect("open");
+    let t = tessera_testkit::build_model(input, &tessera_testkit::sphere(50_000), opts);
+    let model = Model::open(&t.path).expect("open");
     Built {
-        _dir: dir,
-        input,
-        path,
+        _dir: t.dir,
+        input: t.input,
+        path: t.path,
         model,
     }
 }

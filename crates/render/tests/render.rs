@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use tessera_build::{BuildOptions, NoProgress};
+use tessera_build::BuildOptions;
 use tessera_format::Model;
 use tessera_render::{
     diff_stats, enclosed_background_pixels, psnr, Image, Mode, Viewer, ViewerOptions,
@@ -29,15 +29,7 @@ fn complete_viewer(model: &Arc<Model>, tolerance_px: f32) -> Viewer {
     .expect("viewer (is lavapipe installed? apt-get install mesa-vulkan-drivers)")
 }
 
-fn small_options() -> BuildOptions {
-    BuildOptions {
-        memory_bytes: 256 << 20,
-        threads: Some(2),
-        leaf_triangles: 400,
-        node_triangles: 200,
-        ..BuildOptions::default()
-    }
-}
+use tessera_testkit::small_options;
 
 struct Built {
     _dir: tempfile::TempDir,
@@ -46,31 +38,11 @@ struct Built {
 }
 
 fn build(input: Option<&Path>, sphere_triangles: u64, opts: &BuildOptions) -> Built {
-    let dir = tempfile::tempdir().expect("tempdir");
-    let input = match input {
-        Some(p) => p.to_owned(),
-        None => {
-            let p = dir.path().join("sphere.ply");
-            tessera_gen::write_sphere(
-                &p,
-                &tessera_gen::SphereOptions {
-                    triangles: sphere_triangles,
-                    seed: 7,
-                    colors: false,
-                    noise: 0.05,
-                },
-                &tessera_gen::NoProgress,
-            )
-            .expect("generate sphere");
-            p
-        }
-    };
-    let path = dir.path().join("model.tsr");
-    tessera_build::build(&input, &path, opts, &NoProgress).expect("build");
-    let model = Arc::new(Model::open(&path).expect("open"));
+    let t = tessera_testkit::build_model(input, &tessera_testkit::sphere(sphere_triangles), opts);
+    let model = Arc::new(Model::open(&t.path).expect("open"));
     Built {
-        _dir: dir,
-        path,
+        _dir: t.dir,
+        path: t.path,
         model,
     }
 }

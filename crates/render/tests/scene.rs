@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 
 use tessera_build::{BuildOptions, NoProgress};
 use tessera_format::{Model, PatchReader};
-use tessera_mesh::{MeshError, MeshHeader, MeshVisitor, PlyWriter, PlyWriterOptions, Vertex};
+use tessera_mesh::{PlyWriter, PlyWriterOptions};
 use tessera_render::{
     diff_stats, enclosed_background_pixels, FrameStats, Gpu, Image, Mode, Viewer, ViewerOptions,
 };
@@ -22,27 +22,7 @@ const W: u32 = 320;
 const H: u32 = 240;
 
 /// A whole mesh in memory (the test spheres are small).
-#[derive(Default)]
-struct Mesh {
-    header: MeshHeader,
-    vertices: Vec<Vertex>,
-    triangles: Vec<[u32; 3]>,
-}
-
-impl MeshVisitor for Mesh {
-    fn header(&mut self, header: &MeshHeader) -> Result<(), MeshError> {
-        self.header = header.clone();
-        Ok(())
-    }
-    fn vertex(&mut self, v: &Vertex) -> Result<(), MeshError> {
-        self.vertices.push(*v);
-        Ok(())
-    }
-    fn triangle(&mut self, t: [u32; 3]) -> Result<(), MeshError> {
-        self.triangles.push(t);
-        Ok(())
-    }
-}
+type Mesh = tessera_testkit::MeshCollector;
 
 /// Writes a copy of the PLY `from` with every position moved by `offset`.
 fn shifted_copy(from: &Path, to: &Path, offset: [f32; 3]) {

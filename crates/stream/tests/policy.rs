@@ -4,7 +4,6 @@
 //! sources that drop, delay and reorder answers reach the same final cut.
 
 use std::collections::BTreeMap;
-use std::path::PathBuf;
 use std::sync::{Arc, OnceLock};
 use std::time::Instant;
 
@@ -21,36 +20,25 @@ use tessera_stream::{
 // boundary edge at all.
 
 fn model() -> Arc<Model> {
-    static M: OnceLock<(tempfile::TempDir, Arc<Model>)> = OnceLock::new();
+    static M: OnceLock<(tessera_testkit::TestModel, Arc<Model>)> = OnceLock::new();
     M.get_or_init(|| {
-        let dir = tempfile::tempdir().unwrap();
-        let ply = dir.path().join("sphere.ply");
-        let tsr: PathBuf = dir.path().join("sphere.tsr");
-        tessera_gen::write_sphere(
-            &ply,
+        let t = tessera_testkit::build_model(
+            None,
             &tessera_gen::SphereOptions {
                 triangles: 60_000,
                 seed: 7,
                 colors: false,
                 noise: 0.05,
             },
-            &tessera_gen::NoProgress,
-        )
-        .unwrap();
-        tessera_build::build(
-            &ply,
-            &tsr,
             &tessera_build::BuildOptions {
                 leaf_triangles: 400,
                 node_triangles: 200,
                 threads: Some(2),
                 ..Default::default()
             },
-            &tessera_build::NoProgress,
-        )
-        .unwrap();
-        let m = Arc::new(Model::open(&tsr).unwrap());
-        (dir, m)
+        );
+        let m = Arc::new(Model::open(&t.path).unwrap());
+        (t, m)
     })
     .1
     .clone()

@@ -13,16 +13,8 @@ use tessera_format::{Header, Model, PatchData};
 use tessera_mesh::{MeshError, MeshHeader, MeshVisitor, Vertex};
 use tessera_select::{edge_report, merge_patches, CutMesh, EdgeReport, PatchRef};
 
-/// Small nodes so that small meshes give deep hierarchies.
-pub fn small_options() -> BuildOptions {
-    BuildOptions {
-        memory_bytes: 256 << 20,
-        threads: Some(2),
-        leaf_triangles: 400,
-        node_triangles: 200,
-        ..BuildOptions::default()
-    }
-}
+#[allow(unused_imports)]
+pub use tessera_testkit::small_options;
 
 /// A generated sphere built into a model, in its own temporary directory.
 pub struct Built {

@@ -1,0 +1,98 @@
+//! Fixtures shared by the workspace's tests (a dev-dependency only): the build options
+//! that give small meshes deep hierarchies, a generated sphere built into a model in
+//! its own temporary directory, the real scans of `../shared/data` with a message that
+//! says where they come from, and a mesh read whole into memory. One copy instead of one
+//! per test file, so a fixture changed is changed everywhere.
+
+use std::path::{Path, PathBuf};
+
+use tessera_build::{BuildOptions, NoProgress};
+use tessera_gen::SphereOptions;
+use tessera_mesh::{MeshError, MeshHeader, MeshVisitor, Vertex};
+
+/// Small nodes (400-triangle leaves, 200-triangle patches), so that meshes of a few
+/// tens of thousands of triangles give deep hierarchies; 256 MiB, 2 threads.
+pub fn small_options() -> BuildOptions {
+    BuildOptions {
+        memory_bytes: 256 << 20,
+        threads: Some(2),
+        leaf_triangles: 400,
+        node_triangles: 200,
+        ..BuildOptions::default()
+    }
+}
+
+/// A model built for a test (from a real scan or a generated sphere), in a temporary
+/// directory that lives as long as this.
+pub struct TestModel {
+    pub dir: tempfile::TempDir,
+    /// The mesh built: the scan given, or the generated PLY.
+    pub input: PathBuf,
+    /// The built `model.tsr`.
+    pub path: PathBuf,
+}
+
+/// Builds `input` with `opts`, or, without one, the sphere `sphere` generated first.
+pub fn build_model(input: Option<&Path>, sphere: &SphereOptions, opts: &BuildOptions) -> TestModel {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let input = match input {
+        Some(p) => p.to_owned(),
+        None => {
+            let p = dir.path().join("sphere.ply");
+            tessera_gen::write_sphere(&p, sphere, &tessera_gen::NoProgress)
+                .expect("generate sphere");
+            p
+        }
+    };
+    let path = dir.path().join("model.tsr");
+    tessera_build::build(&input, &path, opts, &NoProgress).expect("build");
+    TestModel { dir, input, path }
+}
+
+/// The noisy sphere of `triangles` triangles most tests build (seed 7, noise 0.05, no
+/// colours).
+pub fn sphere(triangles: u64) -> SphereOptions {
+    SphereOptions {
+        triangles,
+        seed: 7,
+        colors: false,
+        noise: 0.05,
+    }
+}
+
+/// The real scan `name` of `../shared/data` (beside the repository); panics with where
+/// the scans come from when it is missing.
+pub fn shared_data(name: &str) -> PathBuf {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../../shared/data")
+        .join(name);
+    assert!(
+        p.exists(),
+        "{} is missing: these tests need the real scans in ../shared/data beside the repository (CI has them)",
+        p.display()
+    );
+    p
+}
+
+/// A mesh read whole into memory through a [`MeshVisitor`] (the test meshes are small).
+#[derive(Default)]
+pub struct MeshCollector {
+    pub header: MeshHeader,
+    pub vertices: Vec<Vertex>,
+    pub triangles: Vec<[u32; 3]>,
+}
+
+impl MeshVisitor for MeshCollector {
+    fn header(&mut self, header: &MeshHeader) -> Result<(), MeshError> {
+        self.header = header.clone();
+        Ok(())
+    }
+    fn vertex(&mut self, v: &Vertex) -> Result<(), MeshError> {
+        self.vertices.push(*v);
+        Ok(())
+    }
+    fn triangle(&mut self, t: [u32; 3]) -> Result<(), MeshError> {
+        self.triangles.push(t);
+        Ok(())
+    }
+}
