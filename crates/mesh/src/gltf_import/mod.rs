@@ -220,15 +220,18 @@ pub(crate) fn read_gltf_from(
                 e.insert(draco::decode(&views, d, dp)?);
             }
         }
+        let mut sink = primitive::DrawSink {
+            emitter: &mut emitter,
+            visitor: &mut *visitor,
+            report: &mut report,
+        };
         let n = primitive::emit_draw(
             &views,
             d,
             d.draco.as_ref().and(draco_decoded.get(&d.primitive)),
             attributes,
             base,
-            &mut emitter,
-            visitor,
-            &mut report,
+            &mut sink,
         )?;
         base += n;
     }

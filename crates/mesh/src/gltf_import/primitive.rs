@@ -15,20 +15,31 @@ use super::draco::{Decoded, Role};
 use super::material::srgb8;
 use super::{scene, Draw, Mode, CHUNK};
 
-/// Deliver one draw: its vertices (numbered from `base`), then its triangles. Returns
-/// the number of vertices delivered. `draco`: the draw's decoded Draco stream, for a
-/// draw read from one.
-#[allow(clippy::too_many_arguments)]
+/// Where a draw's vertices and triangles go: the visitor, through the polygon emitter
+/// (which skips degenerate triangles), with the import's report.
+pub(super) struct DrawSink<'a> {
+    pub emitter: &'a mut PolygonEmitter,
+    pub visitor: &'a mut dyn MeshVisitor,
+    pub report: &'a mut ImportReport,
+}
+
+/// Deliver one draw into `sink`: its vertices (numbered from `base`, with the model's
+/// `attributes`), then its triangles. Returns the number of vertices delivered.
+/// `draco`: the draw's decoded Draco stream, for a draw read from one.
 pub(super) fn emit_draw(
     views: &Views<'_>,
     d: &Draw,
     draco: Option<&Decoded>,
     attributes: Attributes,
     base: u64,
-    emitter: &mut PolygonEmitter,
-    visitor: &mut dyn MeshVisitor,
-    report: &mut ImportReport,
+    sink: &mut DrawSink<'_>,
 ) -> Result<u64, MeshError> {
+    let DrawSink {
+        emitter,
+        visitor,
+        report,
+    } = sink;
+    let (emitter, visitor, report) = (&mut **emitter, &mut **visitor, &mut **report);
     let path = views.path;
     // From the Draco stream where it has the attribute, else from the accessor.
     let open = |role: Role, a: usize, what: &str, components: &[usize]| {
