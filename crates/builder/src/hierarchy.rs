@@ -334,7 +334,7 @@ impl Ctx<'_> {
                     Some(sp) => {
                         let t = RecutTexture::from_bytes(&self.work.read(&sp)?)
                             .ok_or_else(|| self.internal_err("corrupt temporary texture"))?;
-                        b.encode_recut(&p.vertices, t, leaf)?
+                        b.encode_recut(t.unencoded(&p.vertices), leaf)?
                     }
                     None => b.bake(&p.vertices, &p.indices, error, self.step, leaf)?,
                 })

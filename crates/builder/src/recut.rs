@@ -39,6 +39,10 @@ use tessera_mesh::NO_TEXTURE;
 
 use crate::diamond::{position_ids, Merged};
 use crate::patch::{WorkPatch, WorkVertex};
+use crate::texture::encode::BakedTexture;
+use crate::texture::pack::{cell, pack, Rect, GUTTER};
+pub use crate::texture::pack::{chart_cells, planned_texels};
+pub use crate::texture::plan::texel_for;
 
 /// `WorkVertex::texture` of a re-cut vertex: this bit with its chart's index in the low
 /// 16 bits (source texture indices stay far below it).
@@ -393,12 +397,7 @@ pub struct ChildTexels {
 impl ChildTexels {
     /// Child patch `p` with its texture `b` and its vertices' morph targets (`targets`;
     /// empty: their own positions).
-    pub fn of(
-        p: &WorkPatch,
-        b: &crate::texture::BakedTexture,
-        targets: &[[u32; 3]],
-        step: f64,
-    ) -> ChildTexels {
+    pub fn of(p: &WorkPatch, b: &BakedTexture, targets: &[[u32; 3]], step: f64) -> ChildTexels {
         let q: Vec<[u32; 3]> = p.vertices.iter().map(|v| v.q).collect();
         ChildTexels::new(
             q.clone(),
@@ -527,28 +526,6 @@ impl ChildTexels {
     }
 }
 
-/// The model-space texel of a re-cut patch of error `error` whose children's finest
-/// texel is `floor`: `error` (one texel a tolerance, as the source cuts take), never
-/// finer than the children's.
-pub fn texel_for(error: f64, floor: f64) -> f64 {
-    let e = error * crate::texture::TEXEL_PER_ERROR;
-    if floor.is_finite() {
-        e.max(floor)
-    } else {
-        e
-    }
-}
-
-/// The texel rectangle of a chart of `extent` at `texel`: its span, one texel for the
-/// rounding and a gutter each side.
-pub fn chart_cells(extent: [f64; 2], texel: f64) -> [i64; 2] {
-    extent.map(|e| {
-        let n = (e / texel).ceil();
-        let n = if n.is_finite() { n.min(1e6) as i64 } else { 1 };
-        n + 1 + 2 * crate::texture::GUTTER
-    })
-}
-
 /// A re-cut patch's baked texture: RGBA8 and the chart maps (one per chart, in chart
 /// order), before encoding.
 #[derive(Clone, Debug, PartialEq)]
@@ -579,6 +556,26 @@ impl RecutTexture {
         }
         b.extend_from_slice(&self.rgba);
         b
+    }
+
+    /// The texels of re-cut patch `vertices` (which carry their charts in `texture`),
+    /// not yet encoded (`texture` holds the size only), for
+    /// [`crate::texture::Baker::encode_recut`].
+    pub fn unencoded(self, vertices: &[WorkVertex]) -> BakedTexture {
+        BakedTexture {
+            chart_ids: vertices
+                .iter()
+                .map(|v| chart_of(v.texture) as u16)
+                .collect(),
+            charts: self.charts,
+            texture: tessera_format::PatchTexture {
+                width: self.width,
+                height: self.height,
+                ..Default::default()
+            },
+            rgba: self.rgba,
+            planes: self.planes,
+        }
     }
 
     pub fn from_bytes(b: &[u8]) -> Option<RecutTexture> {
@@ -632,7 +629,6 @@ fn bake(
     align: i64,
     error: f64,
 ) -> Option<RecutTexture> {
-    use crate::texture::{cell, pack, Rect, GUTTER};
     let mut rects: Vec<Rect> = frames
         .iter()
         .map(|f| {
@@ -865,22 +861,6 @@ pub fn bake_fitting(
         "a re-cut patch's {} charts do not fit a {MAX_TEXTURE_DIM}-texel texture",
         frames.len()
     ))
-}
-
-/// Texels of the texture of a re-cut patch with charts of `extents` at `texel`, packed
-/// as [`bake`] packs them; `u64::MAX` when they do not fit [`MAX_TEXTURE_DIM`].
-pub fn planned_texels(extents: &[[f64; 2]], texel: f64, align: i64) -> u64 {
-    let mut rects: Vec<crate::texture::Rect> = extents
-        .iter()
-        .map(|&e| {
-            let [w, h] = chart_cells(e, texel);
-            crate::texture::Rect::placed(w, h)
-        })
-        .collect();
-    match crate::texture::pack(&mut rects, align) {
-        Some((w, h)) => (w * h) as u64,
-        None => u64::MAX,
-    }
 }
 
 #[cfg(test)]
