@@ -119,32 +119,8 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     if let Some(dir) = &a.out {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     }
-    let mode = if a.full_resolution {
-        Mode::FullResolution
-    } else if a.complete {
-        Mode::Complete
-    } else {
-        Mode::Progressive
-    };
-    let (gpu_budget_bytes, ram_budget_bytes) = tessera_render::memory_split(a.memory);
-    let opts = ViewerOptions {
-        tolerance_px: a.tolerance,
-        cull: !a.no_cull,
-        mode,
-        gpu_budget_bytes,
-        ram_budget_bytes,
-        loader_threads: a.loaders.max(1),
-        prefetch: !a.no_prefetch,
-        morph: tessera_render::MorphOptions {
-            enabled: !a.no_morph,
-            arrival_blend_s: a.arrival_blend,
-            ..Default::default()
-        },
-        texel_blend: !a.no_texel_blend,
-        read_delay: (a.read_delay_ms > 0)
-            .then(|| std::time::Duration::from_millis(a.read_delay_ms)),
-        ..Default::default()
-    };
+    let mode = mode_of(&a);
+    let opts = viewer_options(&a, mode);
     let t_open = Instant::now();
     let mut viewer = Viewer::new(model.clone(), opts)?;
     let setup_ms = t_open.elapsed().as_secs_f64() * 1e3;
@@ -156,25 +132,17 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     // sums and a histogram): a render of 10^9 frames holds no list of frames or cameras.
     let mut stats_file = match &a.stats {
         None => None,
-        Some(p) => {
-            let err =
-                |e: &dyn std::fmt::Display| anyhow::anyhow!("cannot write {}: {e}", p.display());
-            let mut f =
-                tessera_format::AtomicFile::create(p, 1 << 16).map_err(|e| err(&e.source))?;
-            let head = json!({
+        Some(p) => Some(StatsFile::create(
+            p,
+            json!({
                 "model": a.model.display().to_string(),
                 "adapter": adapter,
                 "width": a.width,
                 "height": a.height,
                 "tolerance_px": a.tolerance,
                 "memory_budget_bytes": a.memory,
-            });
-            // The document is the head's fields, then "frames", then "summary".
-            let head = serde_json::to_string_pretty(&head)?;
-            let head = head.trim_end().trim_end_matches('}').trim_end();
-            write!(f, "{head},\n  \"frames\": [").map_err(|e| err(&e))?;
-            Some(f)
-        }
+            }),
+        )?),
     };
     let bar = indicatif::ProgressBar::with_draw_target(
         Some(u64::from(n)),
@@ -215,8 +183,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
                 v["remote_requests"] = json!(requests);
                 v["index_nodes"] = json!(viewer.scheduler().node_count());
             }
-            let sep = if i == 0 { "\n    " } else { ",\n    " };
-            write!(f, "{sep}{v}").map_err(|e| anyhow::anyhow!("cannot write the stats: {e}"))?;
+            f.frame(&v)?;
         }
         agg.add(&s);
         last = s;
@@ -250,11 +217,8 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
             "requests": r,
         });
     }
-    if let (Some(mut f), Some(p)) = (stats_file, &a.stats) {
-        let err = |e: &dyn std::fmt::Display| anyhow::anyhow!("cannot write {}: {e}", p.display());
-        let summary_text = serde_json::to_string_pretty(&summary)?.replace('\n', "\n  ");
-        write!(f, "\n  ],\n  \"summary\": {summary_text}\n}}\n").map_err(|e| err(&e))?;
-        f.commit().map_err(|e| err(&e.source))?;
+    if let Some(f) = stats_file {
+        f.finish(&summary)?;
     }
     println!(
         "{} frames ({:?}) on {}: mean {:.1} ms/frame (median {:.1}), {:.0} triangles/frame, selection {:.3} ms, peak RSS {} MiB",
@@ -274,6 +238,92 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     }
     report_skipped(&viewer, mode)?;
     Ok(ExitCode::SUCCESS)
+}
+
+/// The frame mode the flags ask for.
+fn mode_of(a: &Args) -> Mode {
+    if a.full_resolution {
+        Mode::FullResolution
+    } else if a.complete {
+        Mode::Complete
+    } else {
+        Mode::Progressive
+    }
+}
+
+/// The viewer's options from the flags: one memory figure split as every front end
+/// splits it (`memory_split`).
+fn viewer_options(a: &Args, mode: Mode) -> ViewerOptions {
+    let (gpu_budget_bytes, ram_budget_bytes) = tessera_render::memory_split(a.memory);
+    ViewerOptions {
+        tolerance_px: a.tolerance,
+        cull: !a.no_cull,
+        mode,
+        gpu_budget_bytes,
+        ram_budget_bytes,
+        loader_threads: a.loaders.max(1),
+        prefetch: !a.no_prefetch,
+        morph: tessera_render::MorphOptions {
+            enabled: !a.no_morph,
+            arrival_blend_s: a.arrival_blend,
+            ..Default::default()
+        },
+        texel_blend: !a.no_texel_blend,
+        read_delay: (a.read_delay_ms > 0)
+            .then(|| std::time::Duration::from_millis(a.read_delay_ms)),
+        ..Default::default()
+    }
+}
+
+/// `--stats FILE`, written as the frames go (one JSON document: the head's fields, then
+/// "frames", then "summary"), atomically: nothing at the path until [`StatsFile::finish`].
+struct StatsFile {
+    f: tessera_format::AtomicFile,
+    path: std::path::PathBuf,
+    frames: u64,
+}
+
+impl StatsFile {
+    fn err(&self, e: &dyn std::fmt::Display) -> anyhow::Error {
+        anyhow::anyhow!("cannot write {}: {e}", self.path.display())
+    }
+
+    /// Starts the document at `path` with the fields of `head`.
+    fn create(path: &std::path::Path, head: serde_json::Value) -> anyhow::Result<StatsFile> {
+        let err =
+            |e: &dyn std::fmt::Display| anyhow::anyhow!("cannot write {}: {e}", path.display());
+        let mut f =
+            tessera_format::AtomicFile::create(path, 1 << 16).map_err(|e| err(&e.source))?;
+        let head = serde_json::to_string_pretty(&head)?;
+        let head = head.trim_end().trim_end_matches('}').trim_end();
+        write!(f, "{head},\n  \"frames\": [").map_err(|e| err(&e))?;
+        Ok(StatsFile {
+            f,
+            path: path.to_path_buf(),
+            frames: 0,
+        })
+    }
+
+    /// One frame's statistics.
+    fn frame(&mut self, v: &serde_json::Value) -> anyhow::Result<()> {
+        let sep = if self.frames == 0 {
+            "\n    "
+        } else {
+            ",\n    "
+        };
+        self.frames += 1;
+        write!(self.f, "{sep}{v}").map_err(|e| self.err(&e))
+    }
+
+    /// Ends the document with `summary` and puts it in place.
+    fn finish(mut self, summary: &serde_json::Value) -> anyhow::Result<()> {
+        let summary_text = serde_json::to_string_pretty(summary)?.replace('\n', "\n  ");
+        write!(self.f, "\n  ],\n  \"summary\": {summary_text}\n}}\n").map_err(|e| self.err(&e))?;
+        let path = self.path.clone();
+        self.f
+            .commit()
+            .map_err(|e| anyhow::anyhow!("cannot write {}: {e}", path.display(), e = e.source))
+    }
 }
 
 /// Says what became of patches that could not be read, truthfully for the mode and the
