@@ -25,6 +25,29 @@ fn wait_within(child: &mut Child, limit: Duration) -> ExitStatus {
     }
 }
 
+/// Runs `tessera ARGS` with its standard error captured, killed past `limit`: its exit
+/// status, standard error and run time.
+fn run_within(args: &[&std::ffi::OsStr], limit: Duration) -> (ExitStatus, String, Duration) {
+    let t = Instant::now();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_tessera"))
+        .args(args)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let status = wait_within(&mut child, limit);
+    let took = t.elapsed();
+    let mut err = String::new();
+    child
+        .stderr
+        .take()
+        .unwrap()
+        .read_to_string(&mut err)
+        .unwrap();
+    eprintln!("{took:?}: {err}");
+    (status, err, took)
+}
+
 #[test]
 fn issue_29_info_against_a_silent_server_fails_within_10_s() {
     let l = TcpListener::bind("127.0.0.1:0").unwrap();
@@ -42,23 +65,8 @@ fn issue_29_info_against_a_silent_server_fails_within_10_s() {
         }
         std::thread::sleep(Duration::from_secs(60));
     });
-    let t = Instant::now();
-    let mut child = Command::new(env!("CARGO_BIN_EXE_tessera"))
-        .args(["info", &format!("http://{addr}/models/m.tsr")])
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let status = wait_within(&mut child, Duration::from_secs(30));
-    let took = t.elapsed();
-    let mut err = String::new();
-    child
-        .stderr
-        .take()
-        .unwrap()
-        .read_to_string(&mut err)
-        .unwrap();
-    eprintln!("{took:?}: {err}");
+    let url = format!("http://{addr}/models/m.tsr");
+    let (status, err, took) = run_within(&["info".as_ref(), url.as_ref()], Duration::from_secs(30));
     assert!(!status.success());
     assert!(took < Duration::from_secs(10), "{took:?}");
     assert!(
@@ -167,35 +175,25 @@ fn issue_29_render_complete_against_a_server_gone_silent_fails_and_says_why() {
     // The first request (64 KiB: header, index, roots of this model) is answered.
     let addr = serve_then_go_silent(bytes, 1);
     let out = tempfile::tempdir().unwrap();
-    let t = Instant::now();
-    let mut child = Command::new(env!("CARGO_BIN_EXE_tessera"))
-        .args([
-            "render",
-            &format!("http://{addr}/m.tsr"),
-            "--orbit",
-            "1",
-            "--complete",
-            "--width",
-            "320",
-            "--height",
-            "240",
-            "--out",
-        ])
-        .arg(out.path())
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let status = wait_within(&mut child, Duration::from_secs(120));
-    let took = t.elapsed();
-    let mut err = String::new();
-    child
-        .stderr
-        .take()
-        .unwrap()
-        .read_to_string(&mut err)
-        .unwrap();
-    eprintln!("{took:?}: {err}");
+    let url = format!("http://{addr}/m.tsr");
+    let flags = [
+        "render",
+        url.as_str(),
+        "--orbit",
+        "1",
+        "--complete",
+        "--width",
+        "320",
+        "--height",
+        "240",
+        "--out",
+    ];
+    let args: Vec<&std::ffi::OsStr> = flags
+        .iter()
+        .map(|a| a.as_ref())
+        .chain([out.path().as_os_str()])
+        .collect();
+    let (status, err, took) = run_within(&args, Duration::from_secs(120));
     assert!(!status.success(), "exit 0 with incomplete frames: {err}");
     assert!(
         err.contains("could not be read") && err.contains("incomplete"),
