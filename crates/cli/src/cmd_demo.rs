@@ -98,7 +98,11 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     if has_display && !a.headless {
         eprintln!("opening the viewer (drag to orbit, wheel to zoom, H hides the HUD)");
         tessera_viewer::run(tessera_viewer::ViewArgs {
-            models: vec![(model, "Nefertiti (demo)".into())],
+            models: vec![(
+                model,
+                "Nefertiti (demo)".into(),
+                tessera_select::Placement::IDENTITY,
+            )],
             camera: None,
             up: None,
             tolerance_px: 1.0,

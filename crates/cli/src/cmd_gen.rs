@@ -91,6 +91,38 @@ enum What {
         #[arg(short, long)]
         quiet: bool,
     },
+    /// A scene file of K placed copies of built models (`.tsr`), for `view` and
+    /// `render` (docs/scene.md): a square grid on the ground, each copy upright, about
+    /// one unit across, turned about the up axis; deterministic.
+    Scene {
+        /// A built model to place (.tsr path or http:// URL), optionally with its up axis
+        /// (`bunny.tsr@+y`; default: the axis its roots are tallest along); repeat to
+        /// take several in turn.
+        #[arg(long = "model", required = true, value_name = "MODEL.tsr[@AXIS]", value_parser = parse_model_up)]
+        models: Vec<(PathBuf, Option<tessera_nav::UpAxis>)>,
+        /// How many copies.
+        #[arg(long)]
+        copies: usize,
+        /// Output scene file (JSON), written atomically; model paths in it are relative
+        /// to its folder when they can be.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// The scene's up axis.
+        #[arg(long, default_value = "+z")]
+        up: tessera_nav::UpAxis,
+        /// Grid cell size, in copy diameters.
+        #[arg(long, default_value_t = 1.5)]
+        spacing: f64,
+        /// Copy sizes vary by this fraction either way.
+        #[arg(long, default_value_t = 0.3)]
+        size_variation: f64,
+        /// Seed of the layout: the same seed writes the same file.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Unused (no progress to show).
+        #[arg(short, long, hide = true)]
+        quiet: bool,
+    },
     /// K copies of a real scan laid out in a grid, as one mesh.
     Tile {
         /// The scan to copy (PLY, OBJ or STL).
@@ -123,6 +155,19 @@ fn parse_count(s: &str) -> Result<u64, String> {
     Ok((n * mult).round() as u64)
 }
 
+/// `PATH` or `PATH@AXIS` (an up axis: +x ... -z).
+fn parse_model_up(s: &str) -> Result<(PathBuf, Option<tessera_nav::UpAxis>), String> {
+    match s.rsplit_once('@') {
+        Some((path, axis)) if !path.is_empty() && axis.len() == 2 => {
+            let up = axis
+                .parse::<tessera_nav::UpAxis>()
+                .map_err(|e| e.to_string())?;
+            Ok((PathBuf::from(path), Some(up)))
+        }
+        _ => Ok((PathBuf::from(s), None)),
+    }
+}
+
 /// Accepts `K` (the most square grid of K tiles) or `COLSxROWS` (e.g. `8x4`).
 fn parse_tiles(s: &str) -> Result<(u32, u32), String> {
     let t = s.trim().to_ascii_lowercase();
@@ -151,8 +196,21 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         What::Sphere { quiet, output, .. }
         | What::Terrain { quiet, output, .. }
         | What::Textured { quiet, output, .. }
+        | What::Scene { quiet, output, .. }
         | What::Tile { quiet, output, .. } => (*quiet, output.clone()),
     };
+    if let What::Scene {
+        models,
+        copies,
+        up,
+        spacing,
+        size_variation,
+        seed,
+        ..
+    } = a.what
+    {
+        return write_scene(&output, &models, copies, up, spacing, size_variation, seed);
+    }
     let bars = Bars::new(quiet);
     if let What::Textured {
         triangles,
@@ -219,7 +277,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         What::Tile { input, copies, .. } => {
             tessera_gen::write_tiled(&input, &output, &TileOptions { copies }, &bars)
         }
-        What::Textured { .. } => unreachable!("handled above"),
+        What::Textured { .. } | What::Scene { .. } => unreachable!("handled above"),
     }
     .with_context(|| format!("generating {}", output.display()))?;
     println!(
@@ -227,6 +285,72 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         output.display(),
         report.triangles,
         report.vertices
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `tessera gen scene`: each model opened for its bounding sphere and up axis, the
+/// layout made (`tessera_scene::copies`), the file written atomically.
+fn write_scene(
+    output: &std::path::Path,
+    models: &[(PathBuf, Option<tessera_nav::UpAxis>)],
+    count: usize,
+    up: tessera_nav::UpAxis,
+    spacing: f64,
+    size_variation: f64,
+    seed: u64,
+) -> anyhow::Result<ExitCode> {
+    use std::io::Write;
+    let out_dir = output
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(std::path::Path::new("."));
+    let out_dir = std::fs::canonicalize(out_dir).with_context(|| {
+        format!(
+            "cannot write {}: no folder {}",
+            output.display(),
+            out_dir.display()
+        )
+    })?;
+    let mut placed = Vec::new();
+    for (m, up) in models {
+        let reader =
+            crate::open::open_model(m).with_context(|| format!("cannot open {}", m.display()))?;
+        let b = reader.index().header().bounding_sphere;
+        let model_up =
+            up.unwrap_or_else(|| tessera_nav::scene_points(reader.as_ref(), 20_000).guess_up());
+        let s = m.to_string_lossy();
+        let reference = if tessera_http::is_url(&s) {
+            s.into_owned()
+        } else {
+            let abs = std::fs::canonicalize(m)?;
+            abs.strip_prefix(&out_dir)
+                .unwrap_or(&abs)
+                .to_string_lossy()
+                .into_owned()
+        };
+        placed.push((reference, b, model_up));
+    }
+    let scene = tessera_scene::copies(&tessera_scene::CopiesOptions {
+        models: placed,
+        count,
+        up,
+        spacing,
+        size_variation,
+        seed,
+    })
+    .map_err(|e| anyhow::anyhow!("cannot lay out the scene: {e}"))?;
+    let text = scene.to_json_string();
+    let err = |e: &dyn std::fmt::Display| anyhow::anyhow!("cannot write {}: {e}", output.display());
+    let mut f =
+        tessera_format::AtomicFile::create(output, text.len()).map_err(|e| err(&e.source))?;
+    f.write_all(text.as_bytes()).map_err(|e| err(&e))?;
+    f.commit().map_err(|e| err(&e.source))?;
+    println!(
+        "wrote {}: {} copies of {} model(s), up {up}",
+        output.display(),
+        count,
+        models.len()
     );
     Ok(ExitCode::SUCCESS)
 }

@@ -17,7 +17,8 @@ use tessera_select::CameraPath;
     clap::ArgGroup::new("cameras").required(true).multiple(false).args(["path", "orbit"])
 ))]
 pub struct Args {
-    /// The model: a .tsr file or an http:// URL of one (e.g. from `tessera serve`).
+    /// The model: a .tsr file or an http:// URL of one (e.g. from `tessera serve`), or
+    /// a scene file of several placed models (.json, see docs/scene.md).
     model: PathBuf,
     /// Camera path (JSON keyframes, see docs/camera.md).
     #[arg(long, value_name = "PATH.json")]
@@ -102,13 +103,14 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         bail!("--orbit needs at least one frame");
     }
     let progressive = !(a.full_resolution || a.complete);
-    let model = crate::open::open_model_paged(&a.model, progressive)
-        .with_context(|| format!("cannot open {}", a.model.display()))?;
+    let opened = crate::open::open_scene(&a.model, progressive)?;
+    // What the remote counters below report: the first model's.
+    let model = opened.models[0].0.clone();
     let shots = match (&a.path, a.orbit) {
         (Some(p), _) => Shots::Path(CameraPath::from_file(p, a.width, a.height)?),
         (None, Some(n)) => {
-            let scene = tessera_nav::scene_points(model.as_ref(), 20_000);
-            let up = a.up.unwrap_or_else(|| scene.guess_up());
+            let scene = opened.points(20_000);
+            let up = a.up.or(opened.up).unwrap_or_else(|| scene.guess_up());
             Shots::Orbit(
                 tessera_nav::orbit_path(&scene, up, n, a.width, a.height)
                     .context("cannot frame the model for an orbit")?,
@@ -122,7 +124,8 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     let mode = mode_of(&a);
     let opts = viewer_options(&a, mode);
     let t_open = Instant::now();
-    let mut viewer = Viewer::new(model.clone(), opts)?;
+    let opened_names = opened.names;
+    let mut viewer = Viewer::with_scene(tessera_render::Gpu::headless()?, opened.models, opts)?;
     let setup_ms = t_open.elapsed().as_secs_f64() * 1e3;
     // What a remote model transferred to show the roots (its index top and root patches).
     let at_first_frame = model.transfer();
@@ -136,6 +139,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
             p,
             json!({
                 "model": a.model.display().to_string(),
+                "scene_models": opened_names.len(),
                 "adapter": adapter,
                 "width": a.width,
                 "height": a.height,

@@ -3,14 +3,15 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use anyhow::{bail, Context};
+use anyhow::bail;
 use tessera_select::{Camera, CameraPath};
 use tessera_viewer::{ViewArgs, ViewError};
 
 #[derive(clap::Args)]
 pub struct Args {
     /// The models: .tsr files or http:// URLs of them, shown together in their own
-    /// model coordinates (scans of one site line up), sharing one memory budget.
+    /// model coordinates (scans of one site line up), sharing one memory budget; or
+    /// scene files (.json, docs/scene.md) of placed models.
     #[arg(required = true)]
     models: Vec<PathBuf>,
     /// Open at this camera (JSON, docs/camera.md; `C` in the viewer copies one).
@@ -70,19 +71,26 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         Some(p) => Some(CameraPath::from_file(p, a.width, a.height)?),
     };
     let mut models = Vec::with_capacity(a.models.len());
+    let mut scene_up = None;
     for path in &a.models {
-        let model = crate::open::open_model_paged(path, true)
-            .with_context(|| format!("cannot open {}", path.display()))?;
-        let name = path.file_name().map_or_else(
-            || path.display().to_string(),
-            |n| n.to_string_lossy().into_owned(),
-        );
-        models.push((model, name));
+        let opened = crate::open::open_scene(path, true)?;
+        scene_up = scene_up.or(opened.up);
+        if opened.models.len() == 1 && !tessera_scene::is_scene_path(path) {
+            let name = path.file_name().map_or_else(
+                || path.display().to_string(),
+                |n| n.to_string_lossy().into_owned(),
+            );
+            models.push((opened.models[0].0.clone(), name, opened.models[0].1));
+            continue;
+        }
+        for ((model, placement), name) in opened.models.into_iter().zip(opened.names) {
+            models.push((model, name, placement));
+        }
     }
     let args = ViewArgs {
         models,
         camera,
-        up: a.up,
+        up: a.up.or(scene_up),
         tolerance_px: a.tolerance,
         memory_bytes: a.memory,
         script,

@@ -25,3 +25,92 @@ pub fn open_model_paged(arg: &Path, paged: bool) -> Result<Arc<dyn PatchReader>,
         (false, _) => Arc::new(Model::open(arg)?),
     })
 }
+
+/// What `view` and `render` open: one model, or a scene file's models with their
+/// placements.
+pub struct OpenedScene {
+    /// Each model and where it stands; the copies of one file share its reader (one
+    /// index in memory, one mapping or connection).
+    pub models: Vec<(Arc<dyn PatchReader>, tessera_select::Placement)>,
+    /// The models' names (a lone model: its path).
+    pub names: Vec<String>,
+    /// The scene file's up axis, if it gives one.
+    pub up: Option<tessera_nav::UpAxis>,
+}
+
+impl OpenedScene {
+    /// The scene's framing points: each distinct model's root vertices (at most
+    /// `max_points` in all), placed wherever it stands.
+    pub fn points(&self, max_points: usize) -> tessera_nav::ScenePoints {
+        let mut distinct: Vec<(*const (), tessera_nav::ScenePoints)> = Vec::new();
+        let per = (max_points / self.models.len().max(1)).max(16);
+        let parts: Vec<tessera_nav::ScenePoints> = self
+            .models
+            .iter()
+            .map(|(m, placement)| {
+                let key = Arc::as_ptr(m) as *const ();
+                let points = match distinct.iter().find(|(k, _)| *k == key) {
+                    Some((_, p)) => p.clone(),
+                    None => {
+                        let p = tessera_nav::scene_points(m.as_ref(), per);
+                        distinct.push((key, p.clone()));
+                        p
+                    }
+                };
+                points.placed(placement)
+            })
+            .collect();
+        tessera_nav::ScenePoints::union(&parts)
+    }
+}
+
+/// Opens `arg`: a scene file (`.json`, see docs/scene.md) with its models, or one model
+/// (local or remote, as [`open_model_paged`]). A scene's relative model paths are
+/// relative to its folder; a model that cannot be opened is named in the error.
+pub fn open_scene(arg: &Path, paged: bool) -> anyhow::Result<OpenedScene> {
+    use anyhow::Context;
+    let s = arg.to_string_lossy();
+    if is_url(&s) || !tessera_scene::is_scene_path(arg) {
+        let model = open_model_paged(arg, paged)
+            .with_context(|| format!("cannot open {}", arg.display()))?;
+        return Ok(OpenedScene {
+            models: vec![(model, tessera_select::Placement::IDENTITY)],
+            names: vec![arg.display().to_string()],
+            up: None,
+        });
+    }
+    let text = std::fs::read_to_string(arg)
+        .with_context(|| format!("cannot read the scene file {}", arg.display()))?;
+    let scene = tessera_scene::Scene::from_json_str(&text)
+        .with_context(|| format!("{} is not a valid scene file", arg.display()))?;
+    let base = arg.parent().unwrap_or(Path::new("."));
+    let mut opened: Vec<(tessera_scene::ModelLocation, Arc<dyn PatchReader>)> = Vec::new();
+    let mut models = Vec::with_capacity(scene.models.len());
+    for (m, at) in scene.models.iter().zip(scene.resolve(base)) {
+        let reader = match opened.iter().find(|(l, _)| *l == at) {
+            Some((_, r)) => r.clone(),
+            None => {
+                let path = match &at {
+                    tessera_scene::ModelLocation::Path(p) => p.clone(),
+                    tessera_scene::ModelLocation::Url(u) => u.into(),
+                };
+                let r = open_model_paged(&path, paged).with_context(|| {
+                    format!(
+                        "{}: model \"{}\": cannot open {}",
+                        arg.display(),
+                        m.name,
+                        path.display()
+                    )
+                })?;
+                opened.push((at, r.clone()));
+                r
+            }
+        };
+        models.push((reader, m.placement));
+    }
+    Ok(OpenedScene {
+        models,
+        names: scene.models.iter().map(|m| m.name.clone()).collect(),
+        up: scene.up,
+    })
+}

@@ -204,45 +204,60 @@ fn two_models_are_shown_in_one_scene() {
         format!(r#"{{"frames": 2, "keyframes": [{cam}, "time_s": 0}}, {cam}, "time_s": 2.0}}]}}"#),
     )
     .unwrap();
-    let shot = dir.path().join("shot.png");
-    let out = xvfb_run()
-        .arg(env!("CARGO_BIN_EXE_tessera"))
-        .args(["view".as_ref(), a.as_os_str(), b.as_os_str()])
-        .args([
-            "--script".as_ref(),
-            script.as_os_str(),
-            "--screenshot".as_ref(),
-            shot.as_os_str(),
-        ])
-        .args(["--width", "640", "--height", "360"])
-        .output()
-        .expect("run the viewer");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let img = Image::load_png(&shot).expect("screenshot");
-    let bg = img.pixel(0, 0);
-    // Model pixels in each half of the image, about as many: the bust on the left
-    // (x = 0), its copy on the right (x = 320).
-    let count = |x0: u32, x1: u32| {
-        (0..img.height)
-            .flat_map(|y| (x0..x1).map(move |x| (x, y)))
-            .filter(|&(x, y)| img.pixel(x, y)[..3] != bg[..3])
-            .count()
-    };
-    let (left, right) = (count(0, 320), count(320, 640));
-    let total = (img.width * img.height) as usize;
-    assert!(
-        left > total / 20 && right > total / 20,
-        "left {left}, right {right} px"
-    );
-    let ratio = left as f64 / right as f64;
-    assert!(
-        (0.7..1.4).contains(&ratio),
-        "the two copies differ: {left} vs {right} px"
-    );
+    // The same pair as a scene file: the one model placed twice, 320 apart.
+    let scene = dir.path().join("pair.json");
+    std::fs::write(
+        &scene,
+        format!(
+            r#"{{"tessera_scene": 1, "up": "+z", "models": [
+                {{"name": "bust", "model": {a:?}}},
+                {{"name": "copy", "model": {a:?}, "translate": [320, 0, 0]}}]}}"#
+        ),
+    )
+    .unwrap();
+    for (how, models) in [("two files", vec![&a, &b]), ("a scene file", vec![&scene])] {
+        let shot = dir.path().join("shot.png");
+        let out = xvfb_run()
+            .arg(env!("CARGO_BIN_EXE_tessera"))
+            .arg("view")
+            .args(models)
+            .args([
+                "--script".as_ref(),
+                script.as_os_str(),
+                "--screenshot".as_ref(),
+                shot.as_os_str(),
+            ])
+            .args(["--width", "640", "--height", "360"])
+            .output()
+            .expect("run the viewer");
+        assert!(
+            out.status.success(),
+            "{how}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let img = Image::load_png(&shot).expect("screenshot");
+        let bg = img.pixel(0, 0);
+        // Model pixels in each half of the image, about as many: the bust on the left
+        // (x = 0), its copy on the right (x = 320).
+        let count = |x0: u32, x1: u32| {
+            (0..img.height)
+                .flat_map(|y| (x0..x1).map(move |x| (x, y)))
+                .filter(|&(x, y)| img.pixel(x, y)[..3] != bg[..3])
+                .count()
+        };
+        let (left, right) = (count(0, 320), count(320, 640));
+        let total = (img.width * img.height) as usize;
+        eprintln!("{how}: left {left}, right {right} px");
+        assert!(
+            left > total / 20 && right > total / 20,
+            "{how}: left {left}, right {right} px"
+        );
+        let ratio = left as f64 / right as f64;
+        assert!(
+            (0.7..1.4).contains(&ratio),
+            "{how}: the two copies differ: {left} vs {right} px"
+        );
+    }
 }
 
 #[test]

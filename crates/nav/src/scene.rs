@@ -50,6 +50,27 @@ impl ScenePoints {
         ScenePoints { points, min, max }
     }
 
+    /// These points where `placement` puts their model (the box: around the placed
+    /// corners of the old one, which holds every point).
+    pub fn placed(&self, placement: &tessera_select::Placement) -> ScenePoints {
+        if placement.is_identity() {
+            return self.clone();
+        }
+        let points = self.points.iter().map(|&p| placement.to_world(p)).collect();
+        let (mut min, mut max) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+        for k in 0..8 {
+            let c = DVec3::new(
+                if k & 1 == 0 { self.min.x } else { self.max.x },
+                if k & 2 == 0 { self.min.y } else { self.max.y },
+                if k & 4 == 0 { self.min.z } else { self.max.z },
+            );
+            let w = placement.to_world(c);
+            min = min.min(w);
+            max = max.max(w);
+        }
+        ScenePoints { points, min, max }
+    }
+
     /// The up axis guessed from the box: the axis it is tallest along.
     pub fn guess_up(&self) -> crate::UpAxis {
         crate::guess_up(self.min.to_array(), self.max.to_array())

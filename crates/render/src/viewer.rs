@@ -20,7 +20,7 @@ use std::time::{Duration, Instant};
 
 use tessera_format::{ModelIndex, PatchReader, ATTR_COLORS, ATTR_TEXTURE};
 use tessera_page::{Pager, PagerOptions, ThreadGrower};
-use tessera_select::Camera;
+use tessera_select::{Camera, Placement};
 use tessera_stream::{
     CompleteError, Driver, MorphOptions, SceneBudgets, SceneStores, Scheduler, SchedulerOptions,
 };
@@ -29,7 +29,7 @@ pub use tessera_stream::{FrameStats, Mode};
 
 use crate::cache::{GpuCache, GpuStore};
 use crate::gpu::Gpu;
-use crate::renderer::{FrameParams, Renderer, Shading};
+use crate::renderer::{FrameParams, Light, Renderer, Shading};
 use crate::RenderError;
 use tessera_image::Image;
 
@@ -175,13 +175,29 @@ impl Viewer {
         models: Vec<Arc<dyn PatchReader>>,
         opts: ViewerOptions,
     ) -> Result<Viewer, RenderError> {
+        let placed = models
+            .into_iter()
+            .map(|m| (m, Placement::IDENTITY))
+            .collect();
+        Self::with_scene(gpu, placed, opts)
+    }
+
+    /// Opens a viewer on a scene of placed models (at least one): each drawn where its
+    /// [`Placement`] puts it (the same reader may stand several times: its index and
+    /// file are shared, its patches cached once per placement). Otherwise as
+    /// [`Viewer::with_models`].
+    pub fn with_scene(
+        gpu: Gpu,
+        models: Vec<(Arc<dyn PatchReader>, Placement)>,
+        opts: ViewerOptions,
+    ) -> Result<Viewer, RenderError> {
         if models.is_empty() {
             return Err(RenderError::Io("a scene needs at least one model".into()));
         }
         let mut renderer = Renderer::new(&gpu.device, wgpu::TextureFormat::Rgba8Unorm);
         renderer.background = opts.background;
         renderer.set_base_vertex(gpu.base_vertex());
-        renderer.has_colors = models[0].index().header().attributes & ATTR_COLORS != 0;
+        renderer.has_colors = models[0].0.index().header().attributes & ATTR_COLORS != 0;
         renderer.texel_blend = opts.texel_blend;
         renderer.ensure_models(&gpu.device, models.len() as u32);
         let mut cache = GpuCache::new(&gpu.device, opts.gpu_budget_bytes);
@@ -190,7 +206,7 @@ impl Viewer {
             opts.ram_budget_bytes,
         ));
         let mut scene = Vec::with_capacity(models.len());
-        for (i, model) in models.into_iter().enumerate() {
+        for (i, (model, placement)) in models.into_iter().enumerate() {
             let index = model.index();
             let scheduler = Scheduler::new(
                 index,
@@ -216,7 +232,8 @@ impl Viewer {
             cache.set_nodes(i as u32, index);
             cache.set_textured(i as u32, index.header().attributes & ATTR_TEXTURE != 0);
             cache.set_texture_codec(i as u32, index.header().patch_texture_codec());
-            driver.add(scheduler, pager, ThreadGrower::new(model.clone()));
+            let k = driver.add(scheduler, pager, ThreadGrower::new(model.clone()));
+            driver.set_placement(k, placement);
             scene.push(SceneModel {
                 quant_step: index.grid().step(),
                 has_colors: index.header().attributes & ATTR_COLORS != 0,
@@ -389,11 +406,20 @@ impl Viewer {
         }
     }
 
-    /// Every model's uniforms for `camera` with the frame's planes.
+    /// Every model's uniforms for `camera` with the frame's planes, each in its own
+    /// coordinates ([`tessera_stream::DrivenModel::view`]).
     fn set_uniforms(&self, camera: &Camera) {
         for (i, m) in self.models.iter().enumerate() {
             let origin = m.model.index().header().cube_origin;
-            let params = FrameParams::with_planes(camera, origin, self.planes, self.opts.shading);
+            let driven = self.driver.model(i);
+            let (camera, planes) = driven.view(camera, self.planes);
+            let mut shading = self.opts.shading;
+            if let Light::Directional(d) = shading.light {
+                // A light fixed in the scene, seen from the model's coordinates.
+                let d = driven.placement().direction_to_model(d.into());
+                shading.light = Light::Directional(d.to_array());
+            }
+            let params = FrameParams::with_planes(&camera, origin, planes, shading);
             self.renderer
                 .set_model_frame(&self.gpu.queue, i as u32, &params, m.has_colors);
         }
@@ -438,6 +464,7 @@ impl Viewer {
             };
             let (gpu, renderer) = (&self.gpu, &self.renderer);
             let m = self.driver.model_mut(i);
+            let select = m.placement().camera_to_model(select);
             let mut store = GpuStore {
                 cache: &mut self.cache,
                 device: &gpu.device,
@@ -448,7 +475,7 @@ impl Viewer {
             let stats = m
                 .scheduler
                 .complete_frame(
-                    select,
+                    &select,
                     &mut m.source,
                     &mut store,
                     |s, nodes, ratios, clear| {

@@ -6,13 +6,14 @@ use std::path::Path;
 use std::sync::{Arc, OnceLock};
 use std::time::{Duration, Instant};
 
+use glam::{DQuat, DVec3};
 use tessera_build::{BuildOptions, NoProgress};
 use tessera_format::{Model, PatchReader};
 use tessera_mesh::{PlyWriter, PlyWriterOptions};
 use tessera_render::{
     diff_stats, enclosed_background_pixels, FrameStats, Gpu, Image, Mode, Viewer, ViewerOptions,
 };
-use tessera_select::Camera;
+use tessera_select::{Camera, Placement};
 
 const MAGENTA: [f64; 4] = [1.0, 0.0, 1.0, 1.0];
 const BG: [u8; 3] = [255, 0, 255];
@@ -522,4 +523,145 @@ fn complete_frames_of_a_scene_with_a_small_cache() {
         many.triangles, many.passes
     );
     assert!(off <= 8, "{off} pixels differ");
+}
+
+/// A similarity that moves, turns and grows a model.
+fn placement() -> Placement {
+    Placement::new(
+        DVec3::new(10.0, -3.0, 2.0),
+        DQuat::from_axis_angle(DVec3::new(0.3, 1.0, 0.2).normalize(), 70f64.to_radians()),
+        2.5,
+    )
+    .expect("a similarity")
+}
+
+/// A placed model is drawn as a camera taken into its coordinates sees it (complete and
+/// progressive frames): the placed scene seen from a world camera is the model alone seen
+/// from that camera moved into the model's frame. The control: the same world camera
+/// on the model left where its coordinates say sees nothing of it.
+#[test]
+fn a_placed_model_is_drawn_where_its_placement_puts_it() {
+    let p = pair();
+    let pl = placement();
+    // Looking at A's placed centre from 2.2 placed radii away (the close-up of A).
+    let local = camera([0.3, 0.4, 2.2], [0.0, 0.0, 0.0]);
+    let world = Camera {
+        position: pl.to_world(DVec3::from(local.position)).to_array(),
+        target: pl.to_world(DVec3::from(local.target)).to_array(),
+        up: pl.direction_to_world(DVec3::from(local.up)).to_array(),
+        ..local.clone()
+    };
+    assert!(pl
+        .camera_to_model(&world)
+        .position
+        .iter()
+        .zip(local.position)
+        .all(|(a, b)| (a - b).abs() < 1e-9));
+    for mode in [Mode::Complete, Mode::Progressive] {
+        let frame = |placed: Placement, cam: &Camera| {
+            let mut v = Viewer::with_scene(
+                gpu(),
+                vec![(reader(&p.a), placed)],
+                opts(mode, 1.0, 256 << 20),
+            )
+            .expect("viewer");
+            let s = if mode == Mode::Progressive {
+                settle(&mut v, cam, 0.0, 20.0)
+            } else {
+                v.render(cam).expect("render")
+            };
+            (s, v.read_image().expect("read"))
+        };
+        let (s_local, alone) = frame(Placement::IDENTITY, &local);
+        let (s_placed, placed) = frame(pl, &world);
+        let covered_px = (0..(W * H) as usize)
+            .filter(|&x| covered(&alone, x))
+            .count();
+        let (off, max) = diff_stats(&alone, &placed, 16).expect("same size");
+        eprintln!(
+            "{mode:?}: {covered_px} px covered, triangles {} alone / {} placed, {off} px differ (max {max})",
+            s_local.triangles,
+            s_placed.triangles,
+        );
+        assert!(
+            covered_px > 20_000,
+            "the close-up fills the frame: {covered_px} px"
+        );
+        assert_eq!(s_local.triangles, s_placed.triangles, "the same cut");
+        assert!(
+            off <= covered_px / 500,
+            "{mode:?}: {off} px differ (max {max})"
+        );
+        assert_eq!(enclosed_background_pixels(&placed, BG), 0);
+        // The control: not placed, the world camera does not see that picture.
+        let (_, unplaced) = frame(Placement::IDENTITY, &world);
+        let (off, _) = diff_stats(&alone, &unplaced, 16).expect("same size");
+        assert!(
+            off > covered_px / 2,
+            "{mode:?}: the unplaced model shows elsewhere ({off} px differ)"
+        );
+    }
+}
+
+/// Copies of one reader placed apart, overlapping on screen: one depth buffer (the
+/// nearer copy hides the farther; planes fitted in world units over both), no crack in
+/// either, the points picked on each lie on that copy.
+#[test]
+fn copies_of_one_model_share_depth_and_show_no_cracks() {
+    let p = pair();
+    let near = Placement::IDENTITY;
+    let far = Placement::new(
+        DVec3::new(1.2, 0.3, -4.0),
+        DQuat::from_axis_angle(DVec3::Y, 2.0),
+        1.8,
+    )
+    .expect("a similarity");
+    let mut v = Viewer::with_scene(
+        gpu(),
+        vec![(reader(&p.a), near), (reader(&p.a), far)],
+        opts(Mode::Progressive, 0.5, 256 << 20),
+    )
+    .expect("scene");
+    let cam = camera([-0.4, 0.2, 4.0], [0.6, 0.1, -2.0]);
+    let s = settle(&mut v, &cam, 0.0, 20.0);
+    let img = v.read_image().expect("read");
+    if std::env::var_os("TESSERA_TEST_TRACE").is_some() {
+        img.save_png(&std::env::temp_dir().join("scene_copies.png"))
+            .unwrap();
+    }
+    let (a, b) = (v.model_stats(0).triangles, v.model_stats(1).triangles);
+    eprintln!(
+        "copies: {} triangles ({a} near, {b} far), planes {:?}",
+        s.triangles,
+        v.clip_planes()
+    );
+    assert!(a > 0 && b > 0, "both copies drawn: {a} {b}");
+    assert_eq!(enclosed_background_pixels(&img, BG), 0, "no crack");
+    // The near copy's centre pixel shows the near copy; a pixel beside it, past its
+    // silhouette, shows the far one (bigger, behind).
+    let project = |x: DVec3| {
+        let b = cam.basis();
+        let d = x - DVec3::from(cam.position);
+        let t = (0.5 * cam.fov_y_deg.to_radians()).tan();
+        let z = d.dot(b.forward);
+        (
+            (d.dot(b.right) / z / (t * W as f64 / H as f64) + 1.0) * 0.5 * W as f64,
+            (1.0 - d.dot(b.up) / z / t) * 0.5 * H as f64,
+        )
+    };
+    // At the far copy's centre the near copy is in front (one depth buffer); beside
+    // it, past the near copy's silhouette, the far copy shows.
+    let b = cam.basis();
+    for (at, on, name) in [
+        (far.to_world(DVec3::ZERO), near, "near"),
+        (far.to_world(DVec3::ZERO) + b.right * 1.5, far, "far"),
+    ] {
+        let (x, y) = project(at);
+        let hit = DVec3::from(v.point_at(x, y).expect("depth").expect("a surface"));
+        let d = on.to_model(hit).length();
+        assert!(
+            (0.9..1.1).contains(&d),
+            "the point picked at {at} ({hit}) lies on the {name} copy: {d:.3} radii from its centre"
+        );
+    }
 }

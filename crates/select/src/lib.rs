@@ -23,6 +23,7 @@ pub mod fuzzing;
 pub mod merge;
 pub mod morph;
 pub mod path;
+pub mod placement;
 pub mod residency;
 pub mod select;
 
@@ -34,6 +35,7 @@ pub use edges::{edge_report, EdgeReport};
 pub use merge::{merge_patches, CutMesh, PatchRef};
 pub use morph::{group_ratio, morph_ratio, refinement_ratio, DEFAULT_MORPH_WINDOW};
 pub use path::{CameraPath, PathError, PATH_FIELDS};
+pub use placement::Placement;
 pub use residency::{
     predict_camera, prefetch_set, select_resident, should_unload, wants_refinement, HotNode,
     NodeView, PrefetchOptions, Selection,

@@ -30,7 +30,7 @@ use std::sync::Arc;
 
 use glam::DVec3;
 use tessera_format::ModelIndex;
-use tessera_select::{clip_planes_along, Camera};
+use tessera_select::{clip_planes_along, Camera, Placement};
 
 use crate::scheduler::{FrameStats, Scheduler};
 use crate::source::PatchSource;
@@ -165,6 +165,8 @@ pub struct DrivenModel<S, G> {
     pub source: S,
     pub grower: G,
     visible: bool,
+    /// Where the model stands in the scene (its coordinates to the world's).
+    placement: Placement,
     stats: FrameStats,
 }
 
@@ -177,6 +179,21 @@ impl<S: PatchSource, G: IndexGrower> DrivenModel<S, G> {
     /// Whether the model is shown.
     pub fn is_visible(&self) -> bool {
         self.visible
+    }
+
+    /// Where the model stands in the scene.
+    pub fn placement(&self) -> &Placement {
+        &self.placement
+    }
+
+    /// The world `camera` and world near/far planes as this model is drawn with them:
+    /// in its own coordinates (see `tessera_select::placement`; unchanged for a model
+    /// that stands where its coordinates say).
+    pub fn view(&self, camera: &Camera, planes: (f64, f64)) -> (Camera, (f64, f64)) {
+        (
+            self.placement.camera_to_model(camera),
+            self.placement.planes_to_model(planes),
+        )
     }
 
     /// This model's part of the last frame.
@@ -246,9 +263,16 @@ impl<S: PatchSource, G: IndexGrower, B: Budgets> Driver<S, G, B> {
             source,
             grower,
             visible: true,
+            placement: Placement::IDENTITY,
             stats: FrameStats::default(),
         });
         self.models.len() - 1
+    }
+
+    /// Places model `i` in the scene (by default it stands where its coordinates say):
+    /// its scheduler selects for the frame's camera taken into its coordinates.
+    pub fn set_placement(&mut self, i: usize, placement: Placement) {
+        self.models[i].placement = placement;
     }
 
     /// Reads every model's roots now where its source can block, and uploads them
@@ -401,7 +425,10 @@ impl<S: PatchSource, G: IndexGrower, B: Budgets> Driver<S, G, B> {
             let m = &mut self.models[i];
             let mut store = stores.store(i);
             m.stats = if m.visible {
-                let stats = m.scheduler.frame(select, time_s, &mut m.source, &mut store);
+                let camera = m.placement.camera_to_model(select);
+                let stats = m
+                    .scheduler
+                    .frame(&camera, time_s, &mut m.source, &mut store);
                 if stats.index_wants > 0 && !m.grower.index().is_complete() {
                     m.grower.grow(time_s);
                 }
@@ -437,8 +464,9 @@ impl<S: PatchSource, G: IndexGrower, B: Budgets> Driver<S, G, B> {
 
     /// Near and far planes for `camera` fitted to the tight spheres of the nodes the
     /// last frame draws, of every model (each index's spheres taken to model
-    /// coordinates through its cube origin): a close-up gets a near plane just in
-    /// front of the surface it looks at, and one depth buffer serves the whole scene.
+    /// coordinates through its cube origin, then to the world through the model's
+    /// placement): a close-up gets a near plane just in front of the surface it looks
+    /// at, and one depth buffer serves the whole scene. World units.
     pub fn fitted_planes(&self, camera: &Camera) -> (f64, f64) {
         let mut spheres = Vec::new();
         for m in &self.models {
@@ -449,10 +477,8 @@ impl<S: PatchSource, G: IndexGrower, B: Budgets> Driver<S, G, B> {
                 let s = nodes.get(n as usize)?.tight_sphere;
                 let c = origin + DVec3::new(f64::from(s[0]), f64::from(s[1]), f64::from(s[2]));
                 // f32 spheres: widen by their rounding.
-                Some((
-                    c,
-                    f64::from(s[3]) * (1.0 + 1e-6) + c.abs().max_element() * 1e-6,
-                ))
+                let r = f64::from(s[3]) * (1.0 + 1e-6) + c.abs().max_element() * 1e-6;
+                Some(m.placement.sphere_to_world(c, r))
             }));
         }
         clip_planes_along(
@@ -468,7 +494,8 @@ impl<S: PatchSource, G: IndexGrower, B: Budgets> Driver<S, G, B> {
     pub fn bounding_planes(&self, camera: &Camera) -> (f64, f64) {
         let spheres = self.models.iter().filter(|m| m.visible).map(|m| {
             let b = m.grower.index().header().bounding_sphere;
-            (DVec3::new(b[0], b[1], b[2]), b[3].max(1e-9))
+            m.placement
+                .sphere_to_world(DVec3::new(b[0], b[1], b[2]), b[3].max(1e-9))
         });
         clip_planes_along(
             DVec3::from(camera.position),

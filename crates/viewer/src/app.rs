@@ -18,6 +18,7 @@ use tessera_format::PatchReader;
 use tessera_nav::{FlyInput, Mode as NavMode, Navigator, UpAxis};
 use tessera_pick::Ray;
 use tessera_render::{FrameStats, Gpu, Light, Mode, Shading, Viewer, ViewerOptions};
+use tessera_select::Placement;
 use tessera_select::{Camera, CameraPath};
 
 use crate::blit::Blit;
@@ -190,7 +191,7 @@ impl Running {
                 "{} - Tessera",
                 args.models
                     .iter()
-                    .map(|(_, n)| n.as_str())
+                    .map(|(_, n, _)| n.as_str())
                     .collect::<Vec<_>>()
                     .join(", ")
             ))
@@ -258,22 +259,41 @@ impl Running {
             return Err(ViewError::Other("no model to show".into()));
         }
         let models: Vec<Arc<dyn PatchReader>> =
-            args.models.iter().map(|(m, _)| m.clone()).collect();
-        let names: Vec<String> = args.models.iter().map(|(_, n)| n.clone()).collect();
-        // Each model's roots, decoded once: a sample thinned so the scene stays near 20k
-        // points (framing), and each box for the up axis.
+            args.models.iter().map(|(m, _, _)| m.clone()).collect();
+        let placements: Vec<Placement> = args.models.iter().map(|(_, _, p)| *p).collect();
+        let names: Vec<String> = args.models.iter().map(|(_, n, _)| n.clone()).collect();
+        // Each distinct model's roots, decoded once: a sample thinned so the scene stays
+        // near 20k points (framing), placed where each copy stands, and each box for the
+        // up axis.
         let per_model = (20_000 / models.len()).max(64);
+        let mut decoded: Vec<(*const (), ScenePoints)> = Vec::new();
         let parts: Vec<ScenePoints> = models
             .iter()
-            .map(|m| scene_points(m.as_ref(), per_model))
+            .zip(&placements)
+            .map(|(m, placement)| {
+                let key = Arc::as_ptr(m) as *const ();
+                let own = match decoded.iter().find(|(k, _)| *k == key) {
+                    Some((_, p)) => p.clone(),
+                    None => {
+                        let p = scene_points(m.as_ref(), per_model);
+                        decoded.push((key, p.clone()));
+                        p
+                    }
+                };
+                own.placed(placement)
+            })
             .collect();
         let scene = ScenePoints::union(&parts);
         // The up axis most models guess from their own extent (ties: the first model's):
         // models side by side make the union wide, not tall.
         let up = args.up.unwrap_or_else(|| majority_up(&parts));
-        let viewer = Viewer::with_models(
+        let viewer = Viewer::with_scene(
             gpu,
-            models.clone(),
+            models
+                .iter()
+                .cloned()
+                .zip(placements.iter().copied())
+                .collect(),
             ViewerOptions {
                 tolerance_px: args.tolerance_px,
                 mode: Mode::Progressive,
@@ -316,7 +336,7 @@ impl Running {
             egui_renderer,
             nav,
             hud: Hud::new(args.tolerance_px, args.prefetch, args.morph),
-            picker: Picker::new(models),
+            picker: Picker::new(models.into_iter().zip(placements).collect()),
             input: Input::default(),
             names,
             up,

@@ -23,13 +23,15 @@ use std::sync::Arc;
 
 use tessera_format::PatchReader;
 use tessera_nav::UpAxis;
-use tessera_select::{Camera, CameraPath};
+use tessera_select::{Camera, CameraPath, Placement};
 
 /// What `tessera view` was asked to show, and how.
 pub struct ViewArgs {
-    /// The models (local files or remote ones) and their names for the HUD: one scene,
-    /// each model in its own model coordinates, one GPU and one RAM budget shared.
-    pub models: Vec<(Arc<dyn PatchReader>, String)>,
+    /// The models (local files or remote ones), their names for the HUD and where each
+    /// stands in the scene (a scene file's placements; identities for models given on
+    /// the command line, which share their model coordinates): one scene, one GPU and
+    /// one RAM budget shared.
+    pub models: Vec<(Arc<dyn PatchReader>, String, Placement)>,
     /// Open at this camera (else the home view framing the model).
     pub camera: Option<Camera>,
     /// Up axis (else guessed from the model's extent).

@@ -7,8 +7,10 @@ use std::sync::mpsc::{channel, Receiver, Sender};
 use std::sync::Arc;
 use std::time::Instant;
 
+use glam::DVec3;
 use tessera_format::PatchReader;
 use tessera_pick::{Hit, Ray};
+use tessera_select::Placement;
 
 /// What a pick is for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -39,8 +41,10 @@ pub struct Picker {
 }
 
 impl Picker {
-    /// A worker picking on `models` (the nearest hit over the visible ones).
-    pub fn new(models: Vec<Arc<dyn PatchReader>>) -> Picker {
+    /// A worker picking on `models`, each where its placement puts it (the nearest hit
+    /// over the visible ones; the ray taken into each model's coordinates, the hit
+    /// brought back to the world's).
+    pub fn new(models: Vec<(Arc<dyn PatchReader>, Placement)>) -> Picker {
         let (tx, jobs) = channel::<(Purpose, Ray, Vec<bool>)>();
         let (done, rx) = channel();
         std::thread::Builder::new()
@@ -49,12 +53,13 @@ impl Picker {
                 for (purpose, ray, visible) in jobs {
                     let t0 = Instant::now();
                     let (mut hit, mut error): (Option<Hit>, Option<String>) = (None, None);
-                    for (i, model) in models.iter().enumerate() {
+                    for (i, (model, placement)) in models.iter().enumerate() {
                         if !visible.get(i).copied().unwrap_or(true) {
                             continue;
                         }
-                        match tessera_pick::pick(model.as_ref(), &ray) {
+                        match tessera_pick::pick(model.as_ref(), &ray_to_model(&ray, placement)) {
                             Ok((Some(h), _)) => {
+                                let h = hit_to_world(h, placement);
                                 if hit.as_ref().is_none_or(|b| h.distance < b.distance) {
                                     hit = Some(h);
                                 }
@@ -102,5 +107,31 @@ impl Picker {
     /// Picks queued and not answered yet.
     pub fn pending(&self) -> usize {
         self.pending
+    }
+}
+
+/// A world ray in `placement`'s model coordinates (its direction keeps its length in
+/// world units per unit of `t`, so distances come back scaled: see [`hit_to_world`]).
+fn ray_to_model(ray: &Ray, placement: &Placement) -> Ray {
+    if placement.is_identity() {
+        return *ray;
+    }
+    let o = placement.to_model(DVec3::from(ray.origin));
+    let d = placement.direction_to_model(DVec3::from(ray.dir));
+    Ray::new(o.to_array(), d.to_array())
+}
+
+/// A hit in model coordinates brought to the world's.
+fn hit_to_world(h: Hit, placement: &Placement) -> Hit {
+    if placement.is_identity() {
+        return h;
+    }
+    Hit {
+        point: placement.to_world(DVec3::from(h.point)).to_array(),
+        distance: h.distance * placement.scale,
+        normal: placement
+            .direction_to_world(DVec3::from(h.normal))
+            .to_array(),
+        ..h
     }
 }
