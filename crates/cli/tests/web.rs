@@ -2440,3 +2440,82 @@ fn the_npm_package_works_in_a_vite_app_in_chromium() {
         "the bundled worker decoded nothing: {s}"
     );
 }
+
+/// A scene file in the browser (issue 31): web/scene.html streams each placed model
+/// through the three.js adapter (matrices from the desktop's own scene reader, compiled
+/// to wasm), and once idle draws the copies where `tessera render --complete` of the
+/// same scene file and camera does: the same cut, the same silhouettes.
+#[test]
+fn a_scene_file_of_placed_copies_draws_in_the_browser_as_natively() {
+    let web = dist();
+    assert!(
+        std::fs::read(web.join("scene.html")).ok()
+            == std::fs::read(repo().join("web/scene.html")).ok(),
+        "{} differs from web/scene.html: run scripts/build-web again",
+        web.join("scene.html").display()
+    );
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let (models, _) = build_bunny(dir);
+    // Three copies of the Bunny: moved, one turned a quarter and grown, one shrunk.
+    let scene = |reference: &str| {
+        format!(
+            r#"{{"tessera_scene": 1, "up": "+y", "models": [
+                {{"name": "left", "model": "{reference}", "translate": [-0.22, 0, 0]}},
+                {{"name": "middle", "model": "{reference}", "rotate": {{"axis": [0, 1, 0], "degrees": 90}}, "scale": 1.3}},
+                {{"name": "right", "model": "{reference}", "translate": [0.24, 0.02, -0.05], "scale": 0.8}}]}}"#
+        )
+    };
+    let native_scene = models.join("scene.json");
+    std::fs::write(&native_scene, scene("bunny.tsr")).unwrap();
+    let camera = r#"{"position": [0.0, 0.25, 0.62], "target": [0.0, 0.11, 0.0], "up": [0, 1, 0], "fov_y_deg": 45"#;
+    let (_server, addr) = serve(&models, &web);
+    let shot = dir.join("scene.png");
+    let page_camera = format!(r#"{camera}, "width": {WIDTH}, "height": {HEIGHT}}}"#);
+    let url = format!(
+        "http://{addr}/scene.html?hud=0#scene={}&camera={}",
+        encode(&scene("models/bunny.tsr")),
+        encode(&page_camera)
+    );
+    let results = browse_alone(
+        json!([{"name": "scene", "url": url, "expect": "idle", "screenshot": shot,
+                "timeout_ms": 120000, "viewport": [WIDTH, HEIGHT]}]),
+        &[],
+        dir,
+    );
+    let r = result(&results, "scene");
+    assert_eq!(r["outcome"], "idle", "{r:#}");
+    let s = &r["stats"];
+    let (native, native_triangles) = render(&native_scene, camera, &dir.join("render-scene"));
+    let page = Image::load_png(&shot).unwrap();
+    if let Some(k) = std::env::var_os("TESSERA_KEEP_SHOTS").map(PathBuf::from) {
+        std::fs::create_dir_all(&k).unwrap();
+        page.save_png(&k.join("scene-page.png")).unwrap();
+        native.save_png(&k.join("scene-native.png")).unwrap();
+    }
+    let (a, b) = (coverage(&page), coverage(&native));
+    let score = iou(&a, &b);
+    // Control: the native frame of the copies left unplaced (all at the Bunny's own
+    // place) covers other pixels.
+    let unplaced = models.join("unplaced.json");
+    std::fs::write(
+        &unplaced,
+        r#"{"tessera_scene": 1, "models": [{"name": "one", "model": "bunny.tsr"}]}"#,
+    )
+    .unwrap();
+    let (lone, _) = render(&unplaced, camera, &dir.join("render-unplaced"));
+    let control = iou(&a, &coverage(&lone));
+    eprintln!(
+        "scene page: idle in {} ms; {} models, {} triangles (native {native_triangles}), {} meshes; silhouette IoU {score:.4} (one unplaced copy: {control:.4}); {} and {} pixels",
+        r["ms"], s["models"], s["triangles"], s["meshes"],
+        a.iter().filter(|&&x| x).count(), b.iter().filter(|&&x| x).count()
+    );
+    assert_eq!(s["models"], 3);
+    assert_eq!(
+        s["triangles"].as_u64(),
+        Some(native_triangles),
+        "the same cut"
+    );
+    assert!(score > MIN_THREE_IOU, "silhouette IoU {score:.4}");
+    assert!(control < 0.6, "control IoU {control:.4}");
+}

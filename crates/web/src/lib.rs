@@ -44,6 +44,7 @@
 
 pub mod budget;
 pub mod plan;
+pub mod scene;
 pub mod wire;
 
 #[cfg(target_arch = "wasm32")]
