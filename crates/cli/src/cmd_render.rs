@@ -83,6 +83,18 @@ pub struct Args {
     /// network, progressive mode).
     #[arg(long, hide = true, default_value_t = 0)]
     read_delay_ms: u64,
+    /// Draw every model as its geometry (by default a scene's models that project to
+    /// less than --impostor-px of radius are drawn as texture impostors, progressive
+    /// frames only; see docs/impostors.md).
+    #[arg(long)]
+    no_impostors: bool,
+    /// Projected radius (pixels) below which a scene's model becomes an impostor.
+    #[arg(long, default_value_t = 40.0, value_name = "PX")]
+    impostor_px: f64,
+    /// Frames a dissolve between geometry and impostor takes (1: a one-frame swap, the
+    /// benchmarks' control).
+    #[arg(long, default_value_t = 8, value_name = "N", hide = true)]
+    impostor_transition_frames: u32,
     /// Seconds over which a group that arrives late blends in from its parent's shape
     /// (progressive mode; 0: it appears at once).
     #[arg(long, default_value_t = 0.25, value_name = "S")]
@@ -98,6 +110,9 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     }
     if !(a.arrival_blend.is_finite() && (0.0..=10.0).contains(&a.arrival_blend)) {
         bail!("--arrival-blend must be between 0 and 10 seconds");
+    }
+    if !(a.impostor_px.is_finite() && a.impostor_px >= 0.0) {
+        bail!("--impostor-px must be a number of pixels, 0 or more");
     }
     if a.orbit == Some(0) {
         bail!("--orbit needs at least one frame");
@@ -122,7 +137,14 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     }
     let mode = mode_of(&a);
-    let opts = viewer_options(&a, mode);
+    let mut opts = viewer_options(&a, mode);
+    if opened.models.len() > 1 && !a.no_impostors && mode == Mode::Progressive {
+        opts.impostors = Some(tessera_render::ImpostorOptions {
+            max_radius_px: a.impostor_px,
+            transition_frames: a.impostor_transition_frames.max(1),
+            ..Default::default()
+        });
+    }
     let t_open = Instant::now();
     let opened_names = opened.names;
     let mut viewer = Viewer::with_scene(tessera_render::Gpu::headless()?, opened.models, opts)?;
@@ -182,6 +204,9 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
             let rss = tessera_build::current_rss_bytes();
             let mut v = serde_json::to_value(&s)?;
             v["rss_bytes"] = json!(rss);
+            if let Some(imp) = viewer.impostor_stats() {
+                v["impostors"] = serde_json::to_value(imp)?;
+            }
             if let Some((bytes, requests)) = model.transfer() {
                 v["remote_bytes"] = json!(bytes);
                 v["remote_requests"] = json!(requests);

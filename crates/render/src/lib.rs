@@ -23,6 +23,7 @@
 
 mod cache;
 mod gpu;
+mod impostor;
 mod renderer;
 mod texture;
 #[cfg(feature = "native")]
@@ -32,6 +33,7 @@ pub use cache::{
     gpu_vertices, gpu_vertices_as, uv_unorm16, GpuCache, GpuCacheStats, GpuStore, GpuVertex, Slot,
 };
 pub use gpu::Gpu;
+pub use impostor::{ImpostorRenderer, Quad, IMPOSTOR_FORMAT, IMPOSTOR_SHADER};
 pub use renderer::{
     ColorMode, DrawInstance, FrameParams, Light, Renderer, Shading, DEPTH_FORMAT, PATCH_SHADER,
 };
@@ -42,7 +44,9 @@ pub use tessera_format::{
 };
 pub use tessera_image::{diff_stats, enclosed_background_pixels, psnr, Image, ImageError};
 pub use tessera_select::clip_planes_along;
-pub use tessera_stream::{memory_split, FrameStats, Mode, MorphOptions};
+pub use tessera_stream::{
+    memory_split, FrameStats, ImpostorOptions, ImpostorStats, Mode, MorphOptions,
+};
 pub use texture::{
     bc7_uploads_as_blocks, downsample, mip_chain, mip_level_count, texture_bind_group_layout,
     texture_gpu_bytes, texture_gpu_bytes_as, SlotTexture, BC7_TEXTURE_FORMAT, PATCH_TEXTURE_FORMAT,

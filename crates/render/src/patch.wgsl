@@ -21,7 +21,8 @@ struct Frame {
     // has per-vertex colours, 0 to use the clay colour.
     sky_up_has_color: vec4<f32>,
     clay: vec4<f32>,
-    // x: colour mode (0 natural, 1 by node, 2 by level); y: 1 = unlit.
+    // x: colour mode (0 natural, 1 by node, 2 by level); y: 1 = unlit; zw: the dither
+    // thresholds a dissolving model keeps ([z, w); the `_dissolve` entry points only).
     mode: vec4<f32>,
 }
 
@@ -163,6 +164,10 @@ fn vs_textured(v: TexturedIn) -> TexturedOut {
 
 @fragment
 fn fs_textured(f: TexturedOut) -> @location(0) vec4<f32> {
+    return textured_color(f);
+}
+
+fn textured_color(f: TexturedOut) -> vec4<f32> {
     // Sampled in uniform control flow; the mode picks by selection, as `mode_color`.
     // The texture's own level of detail, from the uv's screen derivatives in texels,
     // raised to `min_lod` by scaling the derivatives (a patch at its own shape samples
@@ -175,6 +180,37 @@ fn fs_textured(f: TexturedOut) -> @location(0) vec4<f32> {
     let k = select(1.0, floor_rho / max(rho, 1e-8), f.min_lod > 0.0 && rho < floor_rho);
     let texel = textureSampleGrad(patch_texture, patch_sampler, f.uv, dx * k, dy * k).rgb;
     return shade(f.normal, select(texel, f.color, frame.mode.x > 0.5));
+}
+
+// A model dissolving into or out of its impostor (tessera_stream::impostor): each pixel
+// shows it where its dither threshold is in [mode.z, mode.w), the impostor elsewhere.
+// Separate entry points (and pipelines), so the plain ones keep no discard.
+fn dissolved(frag: vec2<f32>) -> bool {
+    let h = dither(frag);
+    return h < frame.mode.z || h >= frame.mode.w;
+}
+
+// Interleaved gradient noise (Jimenez 2014): a threshold in [0, 1) per pixel, evenly
+// spread over every small block of pixels; `impostor.wgsl` has the same.
+fn dither(frag: vec2<f32>) -> f32 {
+    return fract(52.9829189 * fract(dot(floor(frag), vec2<f32>(0.06711056, 0.00583715))));
+}
+
+@fragment
+fn fs_main_dissolve(f: VertexOut) -> @location(0) vec4<f32> {
+    if dissolved(f.clip.xy) {
+        discard;
+    }
+    return shade(f.normal, f.color);
+}
+
+@fragment
+fn fs_textured_dissolve(f: TexturedOut) -> @location(0) vec4<f32> {
+    let c = textured_color(f);
+    if dissolved(f.clip.xy) {
+        discard;
+    }
+    return c;
 }
 
 // Wireframe overlay: dark, half transparent edges.

@@ -104,6 +104,9 @@ pub struct FrameParams {
     pub near: f64,
     pub far: f64,
     pub shading: Shading,
+    /// The dither thresholds this model keeps (`[0, 1)`: every pixel; a model
+    /// dissolving into its impostor keeps a part, see `tessera_stream::impostor`).
+    pub keep: [f32; 2],
 }
 
 impl FrameParams {
@@ -151,7 +154,14 @@ impl FrameParams {
             near,
             far,
             shading,
+            keep: [0.0, 1.0],
         }
+    }
+
+    /// These parameters keeping only the pixels whose dither threshold is in `keep`.
+    pub fn with_keep(mut self, keep: [f32; 2]) -> FrameParams {
+        self.keep = keep;
+        self
     }
 }
 
@@ -251,6 +261,13 @@ pub struct Renderer {
     /// The pipeline of textured models' patches (their slots have a texture), made at
     /// the first frame that draws one: models without textures never pay for it.
     textured_pipeline: std::cell::OnceCell<wgpu::RenderPipeline>,
+    /// The plain and textured pipelines of models dissolving into or out of their
+    /// impostors (`fs_*_dissolve`: they discard), made when first needed.
+    dissolve_pipeline: std::cell::OnceCell<wgpu::RenderPipeline>,
+    textured_dissolve_pipeline: std::cell::OnceCell<wgpu::RenderPipeline>,
+    /// Per uniform entry: whether its model keeps only part of its pixels.
+    dissolving: std::cell::RefCell<Vec<bool>>,
+    plain_layout: wgpu::PipelineLayout,
     shader: wgpu::ShaderModule,
     /// Line pipeline of the wireframe overlay (None: the device cannot draw lines).
     wire_pipeline: Option<wgpu::RenderPipeline>,
@@ -350,6 +367,10 @@ impl Renderer {
         Renderer {
             pipeline,
             textured_pipeline: std::cell::OnceCell::new(),
+            dissolve_pipeline: std::cell::OnceCell::new(),
+            textured_dissolve_pipeline: std::cell::OnceCell::new(),
+            dissolving: std::cell::RefCell::new(Vec::new()),
+            plain_layout: layout,
             shader,
             wire_pipeline,
             wireframe: std::cell::Cell::new(false),
@@ -515,10 +536,17 @@ impl Renderer {
             mode: [
                 color_mode,
                 if p.shading.unlit { 1.0 } else { 0.0 },
-                0.0,
-                0.0,
+                p.keep[0],
+                p.keep[1],
             ],
         };
+        {
+            let mut d = self.dissolving.borrow_mut();
+            if d.len() <= model as usize {
+                d.resize(model as usize + 1, false);
+            }
+            d[model as usize] = p.keep != [0.0, 1.0];
+        }
         queue.write_buffer(
             &self.uniform,
             u64::from(model) * self.stride,
@@ -592,7 +620,36 @@ impl Renderer {
             .flatten()
             .map(|tex_layout| {
                 self.textured_pipeline
-                    .get_or_init(|| self.make_textured_pipeline(device, tex_layout))
+                    .get_or_init(|| self.make_textured_pipeline(device, tex_layout, "fs_textured"))
+            });
+        // Models dissolving into or out of their impostors: the discarding variants.
+        let dissolving = self.dissolving.borrow();
+        let dissolves = |m: u32| dissolving.get(m as usize).copied().unwrap_or(false);
+        let dissolve = draws
+            .iter()
+            .any(|&(m, s)| s.texture.is_none() && dissolves(m))
+            .then(|| {
+                self.dissolve_pipeline.get_or_init(|| {
+                    let spec = PipelineSpec {
+                        layout: &self.plain_layout,
+                        attributes: &VERTEX_ATTRIBUTES,
+                        vs: "vs_main",
+                        fs: "fs_main_dissolve",
+                        polygon_mode: wgpu::PolygonMode::Fill,
+                        bias: Default::default(),
+                    };
+                    patch_pipeline(device, &self.shader, self.color_format, &spec)
+                })
+            });
+        let textured_dissolve = draws
+            .iter()
+            .any(|&(m, s)| s.texture.is_some() && dissolves(m))
+            .then(|| cache.texture_layout())
+            .flatten()
+            .map(|tex_layout| {
+                self.textured_dissolve_pipeline.get_or_init(|| {
+                    self.make_textured_pipeline(device, tex_layout, "fs_textured_dissolve")
+                })
             });
         let instance_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("tessera draw instances"),
@@ -644,9 +701,18 @@ impl Renderer {
             for (k, &(model, s)) in draws.iter().enumerate() {
                 if fill {
                     let tex = s.texture.as_ref().zip(textured);
-                    if current != Some(tex.is_some()) {
-                        pass.set_pipeline(tex.map_or(&self.pipeline, |(_, p)| p));
-                        current = Some(tex.is_some());
+                    let key = (tex.is_some(), dissolves(model));
+                    if current != Some(key) {
+                        let pipeline = match key {
+                            (false, false) => &self.pipeline,
+                            (true, false) => tex.map_or(&self.pipeline, |(_, p)| p),
+                            (false, true) => dissolve.unwrap_or(&self.pipeline),
+                            (true, true) => textured_dissolve
+                                .or(tex.map(|(_, p)| p))
+                                .unwrap_or(&self.pipeline),
+                        };
+                        pass.set_pipeline(pipeline);
+                        current = Some(key);
                         bound = None;
                     }
                     if let Some((t, _)) = tex {
@@ -686,6 +752,7 @@ impl Renderer {
         &self,
         device: &wgpu::Device,
         tex_layout: &wgpu::BindGroupLayout,
+        fs: &str,
     ) -> wgpu::RenderPipeline {
         let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("tessera textured patch pipeline layout"),
@@ -696,7 +763,7 @@ impl Renderer {
             layout: &layout,
             attributes: &TEXTURED_VERTEX_ATTRIBUTES,
             vs: "vs_textured",
-            fs: "fs_textured",
+            fs,
             polygon_mode: wgpu::PolygonMode::Fill,
             bias: Default::default(),
         };
@@ -831,7 +898,7 @@ fn copy_and_map<'b>(
 }
 
 /// A depth target for `width` x `height`.
-fn create_depth_texture(
+pub(crate) fn create_depth_texture(
     device: &wgpu::Device,
     width: u32,
     height: u32,

@@ -22,13 +22,15 @@ use tessera_format::{ModelIndex, PatchReader, ATTR_COLORS, ATTR_TEXTURE};
 use tessera_page::{Pager, PagerOptions, ThreadGrower};
 use tessera_select::{Camera, Placement};
 use tessera_stream::{
-    CompleteError, Driver, MorphOptions, SceneBudgets, SceneStores, Scheduler, SchedulerOptions,
+    CompleteError, Driver, ImpostorOptions, ImpostorStats, Impostors, ModelSphere, MorphOptions,
+    SceneBudgets, SceneStores, Scheduler, SchedulerOptions,
 };
 
 pub use tessera_stream::{FrameStats, Mode};
 
 use crate::cache::{GpuCache, GpuStore};
 use crate::gpu::Gpu;
+use crate::impostor::{ImpostorRenderer, Quad};
 use crate::renderer::{FrameParams, Light, Renderer, Shading};
 use crate::RenderError;
 use tessera_image::Image;
@@ -63,6 +65,9 @@ pub struct ViewerOptions {
     /// Textured models: a patch morphing in from its parent also shows its parent's
     /// texel detail, sharpening as it morphs ([`Renderer::texel_blend`]; true).
     pub texel_blend: bool,
+    /// Texture impostors for distant models (progressive frames; `tessera_stream::
+    /// impostor`). None: off (the default).
+    pub impostors: Option<ImpostorOptions>,
 }
 
 impl Default for ViewerOptions {
@@ -82,6 +87,7 @@ impl Default for ViewerOptions {
             shading: Shading::default(),
             morph: s.morph.clone(),
             texel_blend: true,
+            impostors: None,
         }
     }
 }
@@ -146,6 +152,8 @@ pub struct Viewer {
     planes: (f64, f64),
     /// The last frame's camera (its projection unprojects the depth under a pixel).
     last_camera: Option<Camera>,
+    /// The impostor policy and textures, when on.
+    impostors: Option<(Impostors, ImpostorRenderer)>,
 }
 
 impl Viewer {
@@ -199,7 +207,8 @@ impl Viewer {
         renderer.set_base_vertex(gpu.base_vertex());
         renderer.has_colors = models[0].0.index().header().attributes & ATTR_COLORS != 0;
         renderer.texel_blend = opts.texel_blend;
-        renderer.ensure_models(&gpu.device, models.len() as u32);
+        // One entry a model, and one to sample impostors with.
+        renderer.ensure_models(&gpu.device, models.len() as u32 + 1);
         let mut cache = GpuCache::new(&gpu.device, opts.gpu_budget_bytes);
         let mut driver = Driver::new(SceneBudgets::new(
             opts.gpu_budget_bytes,
@@ -252,6 +261,12 @@ impl Viewer {
             let usable = stores.usable_bytes();
             driver.rebalance(0.0, usable);
         }
+        let impostors = opts.impostors.clone().map(|o| {
+            (
+                Impostors::new(o, scene.len()),
+                ImpostorRenderer::new(&gpu.device, renderer.color_format()),
+            )
+        });
         Ok(Viewer {
             gpu,
             renderer,
@@ -262,6 +277,7 @@ impl Viewer {
             start: Instant::now(),
             planes: (0.0, 0.0),
             last_camera: None,
+            impostors,
         })
     }
 
@@ -371,20 +387,23 @@ impl Viewer {
         self.renderer
             .ensure_offscreen(&self.gpu.device, camera.width, camera.height);
         self.renderer
-            .ensure_models(&self.gpu.device, self.models.len() as u32);
+            .ensure_models(&self.gpu.device, self.models.len() as u32 + 1);
         let time_s = self.start.elapsed().as_secs_f64();
         let mut stats = match self.opts.mode {
             Mode::Progressive => {
                 let (driver, mut stores) = self.stores();
                 let stats = driver.frame(select, time_s, &mut stores);
                 self.planes = self.driver.fitted_planes(camera);
+                let quads = self.update_impostors(select);
                 self.set_uniforms(camera);
                 let draws: Vec<Draws> = self
                     .driver
                     .draws()
+                    .filter(|&(i, _, _)| self.geometry_keep(i).is_some())
                     .map(|(i, nodes, ratios)| (i as u32, nodes, ratios))
                     .collect();
                 self.submit_cleared(&draws);
+                self.submit_quads(camera, &quads);
                 stats
             }
             Mode::Complete | Mode::FullResolution => {
@@ -419,7 +438,8 @@ impl Viewer {
                 let d = driven.placement().direction_to_model(d.into());
                 shading.light = Light::Directional(d.to_array());
             }
-            let params = FrameParams::with_planes(&camera, origin, planes, shading);
+            let params = FrameParams::with_planes(&camera, origin, planes, shading)
+                .with_keep(self.geometry_keep(i).unwrap_or([0.0, 1.0]));
             self.renderer
                 .set_model_frame(&self.gpu.queue, i as u32, &params, m.has_colors);
         }
@@ -509,6 +529,146 @@ impl Viewer {
         let mut stats = self.driver.stats();
         stats.passes = passes;
         Ok(stats)
+    }
+
+    /// The dither thresholds of model `i`'s geometry this frame: all of them without
+    /// impostors; None when a texture stands in for it alone.
+    fn geometry_keep(&self, i: usize) -> Option<[f32; 2]> {
+        match &self.impostors {
+            Some((policy, _)) if self.opts.mode == Mode::Progressive => policy.draw(i).geometry,
+            _ => Some([0.0, 1.0]),
+        }
+    }
+
+    /// The impostor policy's frame for `select`: the decisions, the textures sampled
+    /// (each a pass of the model's drawn cut from the sampling eye, submitted now), and
+    /// the quads to draw.
+    fn update_impostors(&mut self, select: &Camera) -> Vec<Quad> {
+        let Some((mut policy, mut gpu_side)) = self.impostors.take() else {
+            return Vec::new();
+        };
+        let spheres: Vec<ModelSphere> = self
+            .driver
+            .models()
+            .iter()
+            .map(|m| {
+                let b = m.index().header().bounding_sphere;
+                let (center, radius) = m
+                    .placement()
+                    .sphere_to_world(glam::DVec3::new(b[0], b[1], b[2]), b[3]);
+                ModelSphere {
+                    center,
+                    radius,
+                    visible: m.is_visible(),
+                }
+            })
+            .collect();
+        policy.update(select, &spheres);
+        for slot in 0..policy.slot_count() {
+            if !policy.in_use(slot) {
+                gpu_side.release(slot);
+            }
+        }
+        let scratch = self.models.len() as u32;
+        for &(i, slot) in policy.to_sample().to_vec().iter() {
+            let sample = *policy.sample(slot);
+            let d = (sample.center - sample.eye).length();
+            let r = sample.radius * 1.05;
+            let world_planes = ((d - r).max(d * 1e-3), d + r);
+            let driven = self.driver.model(i);
+            let (camera, planes) = driven.view(&sample.camera(), world_planes);
+            let origin = self.models[i].model.index().header().cube_origin;
+            let params = FrameParams::with_planes(&camera, origin, planes, self.opts.shading);
+            self.renderer.set_model_frame(
+                &self.gpu.queue,
+                scratch,
+                &params,
+                self.models[i].has_colors,
+            );
+            let (color, depth) = gpu_side.target(&self.gpu.device, slot, sample.size);
+            let mut enc = self
+                .gpu
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("tessera impostor sample"),
+                });
+            let cache = &self.cache;
+            let nodes = driven.scheduler.draw();
+            let ratios = driven.scheduler.morph_ratios();
+            let slots = nodes.iter().enumerate().filter_map(|(k, &n)| {
+                let ratio = ratios.get(k).copied().unwrap_or(0.0);
+                cache.slot_of(i as u32, n).map(|s| (scratch, s, ratio))
+            });
+            let background = self.renderer.background;
+            self.renderer.background = [0.0; 4];
+            self.renderer.encode_models_pass(
+                &self.gpu.device,
+                &mut enc,
+                color,
+                depth,
+                cache,
+                slots,
+                true,
+            );
+            self.renderer.background = background;
+            self.gpu.queue.submit([enc.finish()]);
+            policy.sampled(slot);
+        }
+        let mut quads = Vec::new();
+        let mut saved = 0;
+        for i in 0..self.models.len() {
+            let d = policy.draw(i);
+            if d.geometry.is_none() {
+                saved += self.driver.model(i).stats().triangles;
+            }
+            for (slot, keep) in d.textures {
+                let (center, right, up) = policy.sample(slot).quad();
+                quads.push(Quad {
+                    slot,
+                    center,
+                    right,
+                    up,
+                    keep,
+                });
+            }
+        }
+        policy.set_triangles_saved(saved);
+        self.impostors = Some((policy, gpu_side));
+        quads
+    }
+
+    /// Draws `quads` over the frame just drawn.
+    fn submit_quads(&self, camera: &Camera, quads: &[Quad]) {
+        let (Some((_, gpu_side)), Some((color, depth))) =
+            (&self.impostors, self.renderer.offscreen_views())
+        else {
+            return;
+        };
+        if quads.is_empty() {
+            return;
+        }
+        let mut enc = self
+            .gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("tessera impostors"),
+            });
+        gpu_side.encode_quads(
+            &self.gpu.device,
+            &self.gpu.queue,
+            &mut enc,
+            color,
+            depth,
+            camera,
+            self.planes,
+            quads,
+        );
+        self.gpu.queue.submit([enc.finish()]);
+    }
+
+    /// The impostors' figures of the last frame (None: impostors off).
+    pub fn impostor_stats(&self) -> Option<ImpostorStats> {
+        self.impostors.as_ref().map(|(p, _)| p.stats())
     }
 
     /// The surface point drawn at pixel (`x`, `y`) of the last frame (pixels from the

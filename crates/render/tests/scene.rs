@@ -665,3 +665,87 @@ fn copies_of_one_model_share_depth_and_show_no_cracks() {
         );
     }
 }
+
+/// A distant copy drawn as a texture impostor (issue 31) looks like its geometry where
+/// it was sampled: the frame with impostors and the frame without differ in few pixels,
+/// the far copy's triangles are saved, no pinhole shows. The control: an impostor left
+/// stale (never re-sampled) after the eye has turned around it differs far more.
+#[test]
+fn an_impostor_looks_like_its_geometry_until_the_eye_moves_on() {
+    let p = pair();
+    let far = Placement::new(DVec3::new(0.0, 0.0, -40.0), DQuat::IDENTITY, 4.0).expect("placed");
+    let scene = || vec![(reader(&p.a), Placement::IDENTITY), (reader(&p.a), far)];
+    let with = |max_error_px: f64| {
+        let mut o = opts(Mode::Progressive, 1.0, 256 << 20);
+        o.impostors = Some(tessera_render::ImpostorOptions {
+            max_radius_px: 30.0,
+            max_error_px,
+            ..Default::default()
+        });
+        Viewer::with_scene(gpu(), scene(), o).expect("scene")
+    };
+    let frames = |v: &mut Viewer, cam: &Camera| {
+        settle(v, cam, 0.0, 20.0);
+        // The dissolve's frames, then one more.
+        for _ in 0..10 {
+            v.render(cam).expect("render");
+        }
+        v.read_image().expect("read")
+    };
+    let cam = camera([1.5, 0.5, 4.0], [0.0, 0.0, -20.0]);
+    let mut geo =
+        Viewer::with_scene(gpu(), scene(), opts(Mode::Progressive, 1.0, 256 << 20)).expect("scene");
+    let reference = frames(&mut geo, &cam);
+    let mut imp = with(1.5);
+    let shot = frames(&mut imp, &cam);
+    let st = imp.impostor_stats().expect("impostors on");
+    let far_px = {
+        // The far copy's pixels: the reference's model pixels off the near copy.
+        let mut only_near = Viewer::with_scene(
+            gpu(),
+            vec![(reader(&p.a), Placement::IDENTITY)],
+            opts(Mode::Progressive, 1.0, 256 << 20),
+        )
+        .expect("near");
+        let near = frames(&mut only_near, &cam);
+        (0..(W * H) as usize)
+            .filter(|&x| covered(&reference, x) && !covered(&near, x))
+            .count()
+    };
+    let (off, max) = diff_stats(&shot, &reference, 24).expect("same size");
+    eprintln!(
+        "impostor: {st:?}; far copy {far_px} px; {off} px differ by more than 24 (max {max})"
+    );
+    if std::env::var_os("TESSERA_TEST_TRACE").is_some() {
+        shot.save_png(&std::env::temp_dir().join("impostor_on.png"))
+            .unwrap();
+        reference
+            .save_png(&std::env::temp_dir().join("impostor_off.png"))
+            .unwrap();
+    }
+    assert_eq!(st.impostors, 1, "the far copy is an impostor: {st:?}");
+    assert!(st.triangles_saved > 0 && st.texture_bytes > 0, "{st:?}");
+    assert!(far_px > 800, "the far copy shows: {far_px} px");
+    assert!(off <= far_px / 10, "{off} px differ (far copy {far_px} px)");
+    assert_eq!(enclosed_background_pixels(&shot, BG), 0);
+
+    // The eye turns 25 degrees around the far copy (its centre at z = -40).
+    let turn = 25f64.to_radians();
+    let (cx, cz, d) = (0.0, -40.0, 44.0);
+    let moved = camera(
+        [cx + d * turn.sin(), 0.5, cz + d * turn.cos()],
+        [0.0, 0.0, -40.0],
+    );
+    let reference = frames(&mut geo, &moved);
+    let fresh = frames(&mut imp, &moved);
+    let mut stale_v = with(1e9);
+    frames(&mut stale_v, &cam);
+    let stale = frames(&mut stale_v, &moved);
+    let (fresh_off, _) = diff_stats(&fresh, &reference, 24).expect("same size");
+    let (stale_off, _) = diff_stats(&stale, &reference, 24).expect("same size");
+    eprintln!("after turning: re-sampled {fresh_off} px differ, never re-sampled {stale_off} px");
+    assert!(
+        stale_off > 2 * fresh_off.max(20),
+        "the stale control must differ more: {stale_off} vs {fresh_off}"
+    );
+}

@@ -26,6 +26,7 @@
 
 mod drive;
 mod groups;
+pub mod impostor;
 mod lru;
 mod morph;
 mod scheduler;
@@ -37,6 +38,9 @@ pub use drive::{
     Budgets, DrivenModel, Driver, IndexGrower, OneStore, SceneBudgets, SceneStores, WholeIndex,
 };
 pub use groups::Groups;
+pub use impostor::{
+    ImpostorDraw, ImpostorOptions, ImpostorSample, ImpostorStats, Impostors, ModelSphere,
+};
 pub use lru::{Lru, PREFERENCE_WINDOW};
 pub use morph::{MorphOptions, MorphSummary, LATE_RATIO};
 pub use scheduler::{

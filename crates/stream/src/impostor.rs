@@ -1,0 +1,658 @@
+//! Texture impostors for distant models (Aliaga, "Visualization of Complex Models Using
+//! Dynamic Texture-based Simplification"): which models of a scene are drawn as a
+//! texture on a plane instead of their geometry, when each texture is sampled again,
+//! and the transitions between the two. The policy only: CPU, no GPU, built for wasm32
+//! like the rest of the crate; a front end samples and draws what it decides
+//! (`tessera_render`'s impostor cache natively).
+//!
+//! Regions are whole models (the paper's "subset of the scene"): a model whose bounding
+//! sphere projects to less than `max_radius_px` becomes an impostor. Its texture is
+//! taken from the current eye, looking at the sphere's centre with the sphere just
+//! inside a square image whose side is the sphere's projected diameter (rounded up to a
+//! power of two, clamped); the textured quad stands on the plane through the centre
+//! facing that eye. Being a whole model, no geometry of another region crosses the
+//! plane, so no border can crack (the paper's morphed borders are needed where one
+//! surface is split between texture and geometry; the plane-depth approximation shows
+//! only where models interpenetrate).
+//!
+//! Error bound (when a texture is sampled again): seen from an eye that has turned by
+//! an angle `a` around the sphere's centre since the sample, points of the model at
+//! different depths shift against each other by up to `radius * a`, i.e. about
+//! `radius_px * a` pixels; the texture is re-sampled when that exceeds
+//! `max_error_px`, or when the sphere's projected size has moved more than
+//! `resample_scale` from the texture's resolution (too blurry, or wastefully sharp).
+//!
+//! Transitions are dissolves over `transition_frames` frames, never a one-frame swap:
+//! each pixel of the region shows either the geometry or the texture, by a per-pixel
+//! threshold (a dither) against the transition's progress, so the share of texture
+//! pixels grows smoothly from 0 to 1 (and back). A re-sample replaces the texture at
+//! once: old and new differ by the error bound at most.
+
+use glam::DVec3;
+use tessera_select::Camera;
+
+/// What the policy is asked to hold to.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ImpostorOptions {
+    pub enabled: bool,
+    /// A model whose bounding sphere projects to a radius below this (pixels) is drawn
+    /// as an impostor; back to geometry above `max_radius_px * hysteresis`.
+    pub max_radius_px: f64,
+    pub hysteresis: f64,
+    /// Parallax error bound, pixels (see the module docs).
+    pub max_error_px: f64,
+    /// Re-sample when the projected diameter moves beyond this factor of the texture's.
+    pub resample_scale: f64,
+    /// Texture sides, texels (powers of two).
+    pub min_size: u32,
+    pub max_size: u32,
+    /// Texture memory of all impostors, bytes (RGBA8): models that do not fit stay
+    /// geometry, the farthest first served.
+    pub max_texture_bytes: u64,
+    /// Textures sampled in one frame at most (each is a small render pass).
+    pub max_samples_per_frame: usize,
+    /// Frames a dissolve takes.
+    pub transition_frames: u32,
+}
+
+impl Default for ImpostorOptions {
+    fn default() -> Self {
+        ImpostorOptions {
+            enabled: true,
+            max_radius_px: 40.0,
+            hysteresis: 1.25,
+            max_error_px: 1.5,
+            resample_scale: 1.5,
+            min_size: 16,
+            max_size: 256,
+            max_texture_bytes: 64 << 20,
+            max_samples_per_frame: 48,
+            transition_frames: 8,
+        }
+    }
+}
+
+/// How a texture was taken: the sampling eye, the sphere, the side in texels.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ImpostorSample {
+    pub eye: DVec3,
+    /// The up direction the sample camera is turned by (the frame camera's then).
+    pub up: DVec3,
+    pub center: DVec3,
+    pub radius: f64,
+    pub size: u32,
+}
+
+impl ImpostorSample {
+    /// Bytes of its texture (RGBA8).
+    pub fn bytes(&self) -> u64 {
+        u64::from(self.size) * u64::from(self.size) * 4
+    }
+
+    /// The camera that takes it: at `eye`, looking at the centre, the sphere just
+    /// inside a square image of `size` texels.
+    pub fn camera(&self) -> Camera {
+        let up_hint = self.up;
+        let d = (self.center - self.eye).length().max(self.radius * 1.0001);
+        let half = (self.radius / d).clamp(1e-9, 0.999_999).asin();
+        let forward = (self.center - self.eye) / d;
+        let up = if up_hint.cross(forward).length_squared() > 1e-12 {
+            up_hint
+        } else {
+            forward.any_orthonormal_vector()
+        };
+        Camera {
+            position: self.eye.to_array(),
+            target: self.center.to_array(),
+            up: up.to_array(),
+            fov_y_deg: (2.0 * half).to_degrees() * 1.02,
+            width: self.size,
+            height: self.size,
+        }
+    }
+
+    /// The quad the texture is drawn on: its centre (the sphere's) and the half-extent
+    /// vectors along the sample camera's right and up, so that the sample camera's
+    /// image maps exactly onto it.
+    pub fn quad(&self) -> (DVec3, DVec3, DVec3) {
+        let cam = self.camera();
+        let b = cam.basis();
+        let d = (self.center - self.eye).length();
+        let h = d * (0.5 * cam.fov_y_deg.to_radians()).tan();
+        (self.center, b.right * h, b.up * h)
+    }
+}
+
+/// What one model shows this frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ImpostorDraw {
+    /// Draw the geometry, keeping the pixels whose dither threshold is in `keep`
+    /// (`[0, 1)` all of them).
+    pub geometry: Option<[f32; 2]>,
+    /// Draw texture `slot` (the front end's), keeping `keep`.
+    pub textures: Vec<(usize, [f32; 2])>,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+enum State {
+    Geometry,
+    /// Dissolving from geometry to texture (`from_texture: None`) or from an old texture
+    /// to a new one; `t` frames done of the transition.
+    Dissolve {
+        from: Option<usize>,
+        to: usize,
+        t: u32,
+    },
+    Impostor(usize),
+    /// Dissolving from a texture back to geometry.
+    Back {
+        from: usize,
+        t: u32,
+    },
+}
+
+/// A texture the front end holds for the policy.
+#[derive(Clone, Debug)]
+struct Slot {
+    sample: ImpostorSample,
+    /// Sampled yet (the front end renders it, then calls [`Impostors::sampled`]).
+    ready: bool,
+    in_use: bool,
+}
+
+/// This frame's figures.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct ImpostorStats {
+    /// Models drawn as a texture only.
+    pub impostors: u32,
+    /// Models in a dissolve (either way, or between two textures).
+    pub transitioning: u32,
+    /// Textures to sample this frame.
+    pub sampling: u32,
+    /// Bytes of the textures held.
+    pub texture_bytes: u64,
+    /// Triangles of the cuts not drawn because a texture stands in (the front end's
+    /// count).
+    pub triangles_saved: u64,
+}
+
+/// The impostor policy of a scene. See the module docs.
+pub struct Impostors {
+    pub options: ImpostorOptions,
+    states: Vec<State>,
+    slots: Vec<Slot>,
+    /// Slots to sample (the front end's work list for this frame).
+    to_sample: Vec<(usize, usize)>,
+    stats: ImpostorStats,
+}
+
+/// A model's bounding sphere in world coordinates, as the policy sees it.
+#[derive(Clone, Copy, Debug)]
+pub struct ModelSphere {
+    pub center: DVec3,
+    pub radius: f64,
+    /// Shown at all (a hidden model is neither).
+    pub visible: bool,
+}
+
+impl Impostors {
+    pub fn new(options: ImpostorOptions, models: usize) -> Impostors {
+        Impostors {
+            options,
+            states: vec![State::Geometry; models],
+            slots: Vec::new(),
+            to_sample: Vec::new(),
+            stats: ImpostorStats::default(),
+        }
+    }
+
+    /// The sphere's projected radius in pixels from `camera` (infinite when the eye is
+    /// inside it).
+    pub fn radius_px(camera: &Camera, center: DVec3, radius: f64) -> f64 {
+        let d = (center - DVec3::from(camera.position)).length();
+        if d <= radius {
+            return f64::INFINITY;
+        }
+        radius / (d * d - radius * radius).sqrt() * camera.projection_scale_px()
+    }
+
+    fn size_for(&self, radius_px: f64) -> u32 {
+        let want = (2.0 * radius_px).ceil().max(1.0) as u32;
+        want.next_power_of_two()
+            .clamp(self.options.min_size, self.options.max_size)
+    }
+
+    fn held_bytes(&self) -> u64 {
+        self.slots
+            .iter()
+            .filter(|s| s.in_use)
+            .map(|s| s.sample.bytes())
+            .sum()
+    }
+
+    fn new_slot(&mut self, sample: ImpostorSample) -> usize {
+        let slot = Slot {
+            sample,
+            ready: false,
+            in_use: true,
+        };
+        match self.slots.iter().position(|s| !s.in_use) {
+            Some(i) => {
+                self.slots[i] = slot;
+                i
+            }
+            None => {
+                self.slots.push(slot);
+                self.slots.len() - 1
+            }
+        }
+    }
+
+    /// Whether texture `slot`, taken as `sample`, is still within the error bound from
+    /// `camera` (see the module docs).
+    pub fn within_bound(&self, sample: &ImpostorSample, camera: &Camera) -> bool {
+        let eye = DVec3::from(camera.position);
+        let (a, b) = (
+            (sample.eye - sample.center).normalize_or_zero(),
+            (eye - sample.center).normalize_or_zero(),
+        );
+        let angle = a.dot(b).clamp(-1.0, 1.0).acos();
+        let r_px = Self::radius_px(camera, sample.center, sample.radius);
+        let size = 2.0 * r_px;
+        let scale = self.options.resample_scale;
+        let size_ok = (size <= f64::from(sample.size) * scale
+            || sample.size >= self.options.max_size)
+            && (size * scale >= f64::from(sample.size) || sample.size <= self.options.min_size);
+        r_px * angle <= self.options.max_error_px && size_ok
+    }
+
+    /// Decides this frame for `camera` over the models' `spheres` (world coordinates):
+    /// which show geometry, which a texture, which dissolve; and which textures the
+    /// front end must sample now ([`Impostors::to_sample`], before drawing).
+    pub fn update(&mut self, camera: &Camera, spheres: &[ModelSphere]) {
+        self.to_sample.clear();
+        if self.states.len() != spheres.len() {
+            self.states.resize(spheres.len(), State::Geometry);
+        }
+        let o = self.options.clone();
+        let frames = o.transition_frames.max(1);
+        // Textures out of their bound first (they show wrong until re-sampled), then the
+        // smallest models first: when the samples of a frame or the texture memory run
+        // short, the models that cost the least texture for the triangles they save get
+        // them.
+        let mut order: Vec<(usize, f64, bool)> = spheres
+            .iter()
+            .enumerate()
+            .map(|(i, s)| {
+                let stale = match self.states[i] {
+                    State::Impostor(slot)
+                    | State::Dissolve { to: slot, .. }
+                    | State::Back { from: slot, .. } => {
+                        !self.within_bound(&self.slots[slot].sample, camera)
+                    }
+                    State::Geometry => false,
+                };
+                (i, Self::radius_px(camera, s.center, s.radius), stale)
+            })
+            .collect();
+        order.sort_by(|a, b| b.2.cmp(&a.2).then(a.1.total_cmp(&b.1)));
+        let eye = DVec3::from(camera.position);
+        let up = camera.basis().up;
+        for (i, r_px, stale) in order {
+            let s = spheres[i];
+            let state = self.states[i].clone();
+            let far = o.enabled && s.visible && r_px < o.max_radius_px;
+            let near = !o.enabled || !s.visible || r_px > o.max_radius_px * o.hysteresis;
+            let sample = ImpostorSample {
+                eye,
+                up,
+                center: s.center,
+                radius: s.radius,
+                size: self.size_for(r_px),
+            };
+            let can_sample = |me: &Self| {
+                me.to_sample.len() < o.max_samples_per_frame
+                    && me.held_bytes() + sample.bytes() <= o.max_texture_bytes
+            };
+            self.states[i] = match state {
+                State::Geometry if far && can_sample(self) => {
+                    let slot = self.new_slot(sample);
+                    self.to_sample.push((i, slot));
+                    State::Dissolve {
+                        from: None,
+                        to: slot,
+                        t: 0,
+                    }
+                }
+                State::Geometry => State::Geometry,
+                State::Impostor(slot) if near => State::Back { from: slot, t: 0 },
+                State::Impostor(slot) if stale && can_sample(self) => {
+                    // The new texture replaces the old at once: the two differ by the
+                    // error bound at most (a dissolve between them would only show
+                    // the dither).
+                    self.slots[slot].in_use = false;
+                    let to = self.new_slot(sample);
+                    self.to_sample.push((i, to));
+                    State::Impostor(to)
+                }
+                // Out of its bound with no sample left this frame: the geometry comes
+                // back (dissolving) rather than a texture showing wrong.
+                State::Impostor(slot) if stale => State::Back { from: slot, t: 0 },
+                State::Impostor(slot) => State::Impostor(slot),
+                State::Dissolve { from, to, t } => {
+                    // A texture out of its bound mid-dissolve is taken again (the eye
+                    // moves fast): the dissolve goes on from an exact picture.
+                    let to = self.refresh(i, to, stale, sample, can_sample(self));
+                    if near {
+                        // Turned back before the end: back to geometry from the new one.
+                        if let Some(f) = from {
+                            self.slots[f].in_use = false;
+                        }
+                        State::Back {
+                            from: to,
+                            t: frames - t.min(frames),
+                        }
+                    } else if t + 1 >= frames {
+                        if let Some(f) = from {
+                            self.slots[f].in_use = false;
+                        }
+                        State::Impostor(to)
+                    } else {
+                        State::Dissolve { from, to, t: t + 1 }
+                    }
+                }
+                State::Back { from, t } => {
+                    let from = self.refresh(i, from, stale, sample, can_sample(self));
+                    if far {
+                        State::Dissolve {
+                            from: None,
+                            to: from,
+                            t: frames - t.min(frames),
+                        }
+                    } else if t + 1 >= frames {
+                        self.slots[from].in_use = false;
+                        State::Geometry
+                    } else {
+                        State::Back { from, t: t + 1 }
+                    }
+                }
+            };
+        }
+        let mut st = ImpostorStats {
+            sampling: self.to_sample.len() as u32,
+            texture_bytes: self.held_bytes(),
+            ..Default::default()
+        };
+        for s in &self.states {
+            match s {
+                State::Impostor(_) => st.impostors += 1,
+                State::Dissolve { .. } | State::Back { .. } => st.transitioning += 1,
+                State::Geometry => {}
+            }
+        }
+        self.stats = st;
+    }
+
+    /// Texture `slot` of model `i`, or a new one sampled now in its place when it is
+    /// `stale` and a sample is left.
+    fn refresh(
+        &mut self,
+        i: usize,
+        slot: usize,
+        stale: bool,
+        sample: ImpostorSample,
+        can_sample: bool,
+    ) -> usize {
+        if !(stale && can_sample) {
+            return slot;
+        }
+        self.slots[slot].in_use = false;
+        let to = self.new_slot(sample);
+        self.to_sample.push((i, to));
+        to
+    }
+
+    /// The textures to sample this frame: (model, slot), each with [`Impostors::sample`].
+    pub fn to_sample(&self) -> &[(usize, usize)] {
+        &self.to_sample
+    }
+
+    /// How texture `slot` is (to be) taken.
+    pub fn sample(&self, slot: usize) -> &ImpostorSample {
+        &self.slots[slot].sample
+    }
+
+    /// Whether texture `slot` is held (a free one's GPU texture can go).
+    pub fn in_use(&self, slot: usize) -> bool {
+        self.slots.get(slot).is_some_and(|s| s.in_use)
+    }
+
+    /// Slots made so far (held or free).
+    pub fn slot_count(&self) -> usize {
+        self.slots.len()
+    }
+
+    /// Adds the front end's count of triangles a texture stood in for this frame.
+    pub fn set_triangles_saved(&mut self, triangles: u64) {
+        self.stats.triangles_saved = triangles;
+    }
+
+    /// The front end has rendered texture `slot`.
+    pub fn sampled(&mut self, slot: usize) {
+        self.slots[slot].ready = true;
+    }
+
+    /// Whether model `i` needs its geometry this frame (drawn, or about to be: a model
+    /// shown by texture alone needs no selection or patches).
+    pub fn needs_geometry(&self, i: usize) -> bool {
+        !matches!(
+            self.states.get(i),
+            Some(State::Impostor(_)) | Some(State::Dissolve { from: Some(_), .. })
+        )
+    }
+
+    /// What model `i` draws this frame (after [`Impostors::update`] and the samples).
+    pub fn draw(&self, i: usize) -> ImpostorDraw {
+        let frames = self.options.transition_frames.max(1) as f32;
+        let all = [0.0, 1.0];
+        let ready = |slot: usize| self.slots[slot].ready;
+        match self.states.get(i) {
+            None | Some(State::Geometry) => ImpostorDraw {
+                geometry: Some(all),
+                textures: vec![],
+            },
+            Some(State::Impostor(slot)) => ImpostorDraw {
+                geometry: None,
+                textures: vec![(*slot, all)],
+            },
+            Some(&State::Dissolve { from, to, t }) => {
+                // Progress after this frame's step: the texture's share of the pixels.
+                let f = ((t + 1) as f32 / frames).min(1.0);
+                let (old_keep, new_keep) = ([f, 1.0], [0.0, f]);
+                let mut textures = Vec::new();
+                if ready(to) {
+                    textures.push((to, new_keep));
+                }
+                match from {
+                    Some(old) => {
+                        textures.push((old, if ready(to) { old_keep } else { all }));
+                        ImpostorDraw {
+                            geometry: None,
+                            textures,
+                        }
+                    }
+                    None => ImpostorDraw {
+                        geometry: Some(if ready(to) { old_keep } else { all }),
+                        textures,
+                    },
+                }
+            }
+            Some(&State::Back { from, t }) => {
+                let f = ((t + 1) as f32 / frames).min(1.0);
+                ImpostorDraw {
+                    geometry: Some([0.0, f]),
+                    textures: vec![(from, [f, 1.0])],
+                }
+            }
+        }
+    }
+
+    /// This frame's figures.
+    pub fn stats(&self) -> ImpostorStats {
+        self.stats
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cam(x: f64, y: f64, z: f64) -> Camera {
+        Camera {
+            position: [x, y, z],
+            target: [0.0, 0.0, 0.0],
+            up: [0.0, 0.0, 1.0],
+            fov_y_deg: 50.0,
+            width: 1280,
+            height: 720,
+        }
+    }
+
+    fn sphere() -> [ModelSphere; 1] {
+        [ModelSphere {
+            center: DVec3::ZERO,
+            radius: 1.0,
+            visible: true,
+        }]
+    }
+
+    /// Runs frames from `c`, sampling what is asked; returns each frame's draw.
+    fn run(p: &mut Impostors, c: &Camera, frames: usize) -> Vec<ImpostorDraw> {
+        (0..frames)
+            .map(|_| {
+                p.update(c, &sphere());
+                for &(_, slot) in p.to_sample().to_vec().iter() {
+                    p.sampled(slot);
+                }
+                p.draw(0)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_far_model_dissolves_into_a_texture_and_back_never_in_one_frame() {
+        let mut p = Impostors::new(ImpostorOptions::default(), 1);
+        // Near: 1 unit at 3 units is far more than 40 px.
+        let near = run(&mut p, &cam(3.0, 0.0, 0.0), 3);
+        assert!(near
+            .iter()
+            .all(|d| d.geometry == Some([0.0, 1.0]) && d.textures.is_empty()));
+        // Far: 1 unit at 100 units is ~7.7 px.
+        let far = run(&mut p, &cam(100.0, 0.0, 0.0), 12);
+        let frames = p.options.transition_frames as usize;
+        // The texture's share of the pixels grows frame by frame to 1.
+        let mut last = 0.0;
+        for d in &far[..frames] {
+            let share = d.textures.iter().map(|(_, k)| k[1] - k[0]).sum::<f32>();
+            let geo = d.geometry.map_or(0.0, |k| k[1] - k[0]);
+            assert!(
+                (share + geo - 1.0).abs() < 1e-6,
+                "{d:?}: every pixel one or the other"
+            );
+            assert!(
+                share > last && share - last <= 1.0 / frames as f32 + 1e-6,
+                "{d:?}"
+            );
+            last = share;
+        }
+        assert!(far[frames..]
+            .iter()
+            .all(|d| d.geometry.is_none() && d.textures.len() == 1));
+        assert_eq!(p.stats().impostors, 1);
+        assert!(!p.needs_geometry(0));
+        assert_eq!(
+            p.stats().texture_bytes,
+            16 * 16 * 4,
+            "~7.7 px radius: a 16-texel side"
+        );
+        // Near again: back to geometry over the same number of frames.
+        let back = run(&mut p, &cam(3.0, 0.0, 0.0), frames + 2);
+        assert!(back[0].geometry.is_some() && !back[0].textures.is_empty());
+        assert_eq!(
+            back[frames],
+            ImpostorDraw {
+                geometry: Some([0.0, 1.0]),
+                textures: vec![]
+            }
+        );
+        assert_eq!(p.stats().texture_bytes, 0, "the texture is given back");
+    }
+
+    #[test]
+    fn turning_past_the_error_bound_resamples() {
+        let mut p = Impostors::new(ImpostorOptions::default(), 1);
+        run(&mut p, &cam(100.0, 0.0, 0.0), 10);
+        let r_px = Impostors::radius_px(&cam(100.0, 0.0, 0.0), DVec3::ZERO, 1.0);
+        // Within the bound (r_px * angle below 1.5 px): the same texture.
+        let small = 0.5 / r_px;
+        run(
+            &mut p,
+            &cam(100.0 * small.cos(), 100.0 * small.sin(), 0.0),
+            2,
+        );
+        assert_eq!(p.stats().sampling, 0);
+        assert_eq!(p.stats().impostors, 1);
+        // Past it: a new texture, in place of the old at once.
+        let big = 3.0 / r_px;
+        let c = cam(100.0 * big.cos(), 100.0 * big.sin(), 0.0);
+        p.update(&c, &sphere());
+        assert_eq!(p.stats().sampling, 1);
+        let (_, slot) = p.to_sample()[0];
+        p.sampled(slot);
+        let d = p.draw(0);
+        assert!(
+            d.geometry.is_none() && d.textures == vec![(slot, [0.0, 1.0])],
+            "{d:?}"
+        );
+        assert!(p.within_bound(p.sample(slot), &c));
+        assert_eq!(
+            p.stats().texture_bytes,
+            p.sample(slot).bytes(),
+            "the old one is given back"
+        );
+    }
+
+    #[test]
+    fn the_texture_budget_keeps_models_as_geometry() {
+        let o = ImpostorOptions {
+            max_texture_bytes: 16 * 16 * 4,
+            ..Default::default()
+        };
+        let mut p = Impostors::new(o, 2);
+        let spheres = [
+            ModelSphere {
+                center: DVec3::ZERO,
+                radius: 1.0,
+                visible: true,
+            },
+            ModelSphere {
+                center: DVec3::new(0.0, 5.0, 0.0),
+                radius: 1.0,
+                visible: true,
+            },
+        ];
+        p.update(&cam(100.0, 0.0, 0.0), &spheres);
+        assert_eq!(p.stats().sampling, 1, "one texture fits");
+        assert!(p.stats().texture_bytes <= 16 * 16 * 4);
+        // Disabled: everything geometry.
+        let mut off = Impostors::new(
+            ImpostorOptions {
+                enabled: false,
+                ..Default::default()
+            },
+            2,
+        );
+        off.update(&cam(100.0, 0.0, 0.0), &spheres);
+        assert_eq!(off.stats(), ImpostorStats::default());
+    }
+}
