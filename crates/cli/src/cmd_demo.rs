@@ -112,6 +112,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
             screenshot: None,
             prefetch: true,
             morph: true,
+            impostors: true,
             width: 1280,
             height: 720,
             loaders: 2,

@@ -95,6 +95,9 @@ pub struct Args {
     /// benchmarks' control).
     #[arg(long, default_value_t = 8, value_name = "N", hide = true)]
     impostor_transition_frames: u32,
+    /// The impostors' parallax error bound, pixels (a texture is sampled again past it).
+    #[arg(long, default_value_t = 1.5, value_name = "PX")]
+    impostor_error_px: f64,
     /// Seconds over which a group that arrives late blends in from its parent's shape
     /// (progressive mode; 0: it appears at once).
     #[arg(long, default_value_t = 0.25, value_name = "S")]
@@ -113,6 +116,9 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     }
     if !(a.impostor_px.is_finite() && a.impostor_px >= 0.0) {
         bail!("--impostor-px must be a number of pixels, 0 or more");
+    }
+    if !(a.impostor_error_px.is_finite() && a.impostor_error_px > 0.0) {
+        bail!("--impostor-error-px must be a positive number of pixels");
     }
     if a.orbit == Some(0) {
         bail!("--orbit needs at least one frame");
@@ -142,6 +148,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         opts.impostors = Some(tessera_render::ImpostorOptions {
             max_radius_px: a.impostor_px,
             transition_frames: a.impostor_transition_frames.max(1),
+            max_error_px: a.impostor_error_px,
             ..Default::default()
         });
     }

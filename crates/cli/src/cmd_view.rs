@@ -44,6 +44,10 @@ pub struct Args {
     /// Switch levels without geomorphing (G toggles it in the window).
     #[arg(long)]
     no_morph: bool,
+    /// Draw every model of a scene as its geometry (by default distant ones are drawn
+    /// as texture impostors, docs/impostors.md).
+    #[arg(long)]
+    no_impostors: bool,
     /// Window width, pixels.
     #[arg(long, default_value_t = 1280)]
     width: u32,
@@ -98,6 +102,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         screenshot: a.screenshot,
         prefetch: !a.no_prefetch,
         morph: !a.no_morph,
+        impostors: !a.no_impostors,
         width: a.width,
         height: a.height,
         loaders: a.loaders,

@@ -1,6 +1,6 @@
 //! The GPU side of texture impostors (the policy is `tessera_stream::impostor`): one
-//! texture per impostor slot (RGBA8, its side a power of two) with a depth buffer per
-//! size to sample into, and the pipeline that draws the textured quads
+//! texture per impostor slot (RGBA8, the size of the image rectangle it was sampled
+//! over) with depth buffers to sample into, and the pipeline that draws the textured quads
 //! (`impostor.wgsl`) into the frame's pass, depth-tested against the geometry.
 
 use glam::DVec3;
@@ -16,7 +16,7 @@ pub const IMPOSTOR_SHADER: &str = include_str!("impostor.wgsl");
 pub const IMPOSTOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 
 struct Target {
-    size: u32,
+    size: [u32; 2],
     view: wgpu::TextureView,
     bind_group: wgpu::BindGroup,
     _texture: wgpu::Texture,
@@ -49,7 +49,7 @@ pub struct ImpostorRenderer {
     uniform: wgpu::Buffer,
     uniform_group: wgpu::BindGroup,
     targets: Vec<Option<Target>>,
-    depths: Vec<(u32, wgpu::TextureView, wgpu::Texture)>,
+    depths: Vec<([u32; 2], wgpu::TextureView, wgpu::Texture)>,
 }
 
 impl ImpostorRenderer {
@@ -170,13 +170,14 @@ impl ImpostorRenderer {
         }
     }
 
-    /// The colour and depth views to sample slot `slot` into, `size` texels a side
-    /// (its texture made or remade to that size).
+    /// The colour and depth views to sample slot `slot` into, `size` texels (its
+    /// texture made or remade to that size; depth buffers are kept per size, at most
+    /// a few: the largest sizes are kept).
     pub fn target(
         &mut self,
         device: &wgpu::Device,
         slot: usize,
-        size: u32,
+        size: [u32; 2],
     ) -> (&wgpu::TextureView, &wgpu::TextureView) {
         if self.targets.len() <= slot {
             self.targets.resize_with(slot + 1, || None);
@@ -185,8 +186,8 @@ impl ImpostorRenderer {
             let texture = device.create_texture(&wgpu::TextureDescriptor {
                 label: Some("tessera impostor"),
                 size: wgpu::Extent3d {
-                    width: size,
-                    height: size,
+                    width: size[0],
+                    height: size[1],
                     depth_or_array_layers: 1,
                 },
                 mip_level_count: 1,
@@ -220,7 +221,11 @@ impl ImpostorRenderer {
             });
         }
         if !self.depths.iter().any(|(s, _, _)| *s == size) {
-            let (texture, view) = crate::renderer::create_depth_texture(device, size, size);
+            // Sizes vary with every model's projection: keep the last few.
+            if self.depths.len() >= 8 {
+                self.depths.remove(0);
+            }
+            let (texture, view) = crate::renderer::create_depth_texture(device, size[0], size[1]);
             self.depths.push((size, view, texture));
         }
         let color = &self.targets[slot].as_ref().expect("made above").view;
@@ -245,7 +250,7 @@ impl ImpostorRenderer {
         self.targets
             .iter()
             .flatten()
-            .map(|t| u64::from(t.size) * u64::from(t.size) * 4)
+            .map(|t| u64::from(t.size[0]) * u64::from(t.size[1]) * 4)
             .sum()
     }
 

@@ -571,14 +571,14 @@ impl Viewer {
         }
         let scratch = self.models.len() as u32;
         for &(i, slot) in policy.to_sample().to_vec().iter() {
-            let sample = *policy.sample(slot);
-            let d = (sample.center - sample.eye).length();
-            let r = sample.radius * 1.05;
-            let world_planes = ((d - r).max(d * 1e-3), d + r);
+            let sample = policy.sample(slot).clone();
             let driven = self.driver.model(i);
-            let (camera, planes) = driven.view(&sample.camera(), world_planes);
+            // The frame's own camera over the sphere's rectangle of the image: at the
+            // sampling eye the texels are the frame's pixels.
+            let (camera, planes) = driven.view(&sample.camera, sample.planes());
             let origin = self.models[i].model.index().header().cube_origin;
-            let params = FrameParams::with_planes(&camera, origin, planes, self.opts.shading);
+            let mut params = FrameParams::with_planes(&camera, origin, planes, self.opts.shading);
+            params.view_proj = glam::Mat4::from_cols_array_2d(&sample.crop()) * params.view_proj;
             self.renderer.set_model_frame(
                 &self.gpu.queue,
                 scratch,

@@ -726,7 +726,11 @@ fn an_impostor_looks_like_its_geometry_until_the_eye_moves_on() {
     assert_eq!(st.impostors, 1, "the far copy is an impostor: {st:?}");
     assert!(st.triangles_saved > 0 && st.texture_bytes > 0, "{st:?}");
     assert!(far_px > 800, "the far copy shows: {far_px} px");
-    assert!(off <= far_px / 10, "{off} px differ (far copy {far_px} px)");
+    // Sampled over the frame's own pixels: the same rasterisation (measured: 0 px).
+    assert!(
+        off <= far_px / 100,
+        "{off} px differ (far copy {far_px} px)"
+    );
     assert_eq!(enclosed_background_pixels(&shot, BG), 0);
 
     // The eye turns 25 degrees around the far copy (its centre at z = -40).

@@ -43,8 +43,8 @@ pub struct ImpostorOptions {
     pub max_error_px: f64,
     /// Re-sample when the projected diameter moves beyond this factor of the texture's.
     pub resample_scale: f64,
-    /// Texture sides, texels (powers of two).
-    pub min_size: u32,
+    /// Largest texture side, texels (a larger rectangle is sampled at less than a
+    /// texel a pixel).
     pub max_size: u32,
     /// Texture memory of all impostors, bytes (RGBA8): models that do not fit stay
     /// geometry, the farthest first served.
@@ -63,7 +63,6 @@ impl Default for ImpostorOptions {
             hysteresis: 1.25,
             max_error_px: 1.5,
             resample_scale: 1.5,
-            min_size: 16,
             max_size: 256,
             max_texture_bytes: 64 << 20,
             max_samples_per_frame: 48,
@@ -72,54 +71,113 @@ impl Default for ImpostorOptions {
     }
 }
 
-/// How a texture was taken: the sampling eye, the sphere, the side in texels.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// How a texture was taken: with the frame's own camera, over the rectangle of the
+/// image the model's sphere covers, so that at the sampling eye its texels are the
+/// frame's pixels (the same rasterisation, not a resampled picture); `size` texels (the
+/// rectangle's pixels, scaled down to fit `max_size` if it is larger).
+#[derive(Clone, Debug, PartialEq)]
 pub struct ImpostorSample {
-    pub eye: DVec3,
-    /// The up direction the sample camera is turned by (the frame camera's then).
-    pub up: DVec3,
+    /// The frame camera it was taken with (world coordinates).
+    pub camera: Camera,
+    /// The image rectangle: left, top, width, height, whole pixels of `camera`'s image.
+    pub rect: [f64; 4],
+    pub size: [u32; 2],
     pub center: DVec3,
     pub radius: f64,
-    pub size: u32,
+    /// The sphere's projected radius then, pixels.
+    pub radius_px: f64,
 }
 
 impl ImpostorSample {
+    /// The sample of the sphere (`center`, `radius`) seen by `camera`, at most
+    /// `max_size` texels a side; None when the sphere is not wholly in front of the eye.
+    pub fn new(
+        camera: &Camera,
+        center: DVec3,
+        radius: f64,
+        max_size: u32,
+    ) -> Option<ImpostorSample> {
+        let b = camera.basis();
+        let eye = DVec3::from(camera.position);
+        let z = (center - eye).dot(b.forward);
+        if z <= radius * 1.001 {
+            return None;
+        }
+        let (w, h) = (f64::from(camera.width), f64::from(camera.height));
+        let scale = camera.projection_scale_px();
+        let cx = w * 0.5 + (center - eye).dot(b.right) / z * scale;
+        let cy = h * 0.5 - (center - eye).dot(b.up) / z * scale;
+        // The projected sphere's extent, with room for its off-axis stretch and for
+        // the filter at the silhouette.
+        let r_px = Impostors::radius_px(camera, center, radius);
+        let half = r_px * (1.0 + 0.5 * ((cx - w * 0.5).hypot(cy - h * 0.5) / scale).powi(2)) + 2.0;
+        let (x0, y0) = ((cx - half).floor(), (cy - half).floor());
+        let side = ((cx + half).ceil() - x0)
+            .max((cy + half).ceil() - y0)
+            .max(1.0);
+        let k = (side / f64::from(max_size.max(1))).max(1.0);
+        let texels = (side / k).ceil().max(1.0) as u32;
+        Some(ImpostorSample {
+            camera: camera.clone(),
+            rect: [x0, y0, side, side],
+            size: [texels, texels],
+            center,
+            radius,
+            radius_px: r_px,
+        })
+    }
+
+    /// The sampling eye.
+    pub fn eye(&self) -> DVec3 {
+        DVec3::from(self.camera.position)
+    }
+
     /// Bytes of its texture (RGBA8).
     pub fn bytes(&self) -> u64 {
-        u64::from(self.size) * u64::from(self.size) * 4
+        u64::from(self.size[0]) * u64::from(self.size[1]) * 4
     }
 
-    /// The camera that takes it: at `eye`, looking at the centre, the sphere just
-    /// inside a square image of `size` texels.
-    pub fn camera(&self) -> Camera {
-        let up_hint = self.up;
-        let d = (self.center - self.eye).length().max(self.radius * 1.0001);
-        let half = (self.radius / d).clamp(1e-9, 0.999_999).asin();
-        let forward = (self.center - self.eye) / d;
-        let up = if up_hint.cross(forward).length_squared() > 1e-12 {
-            up_hint
-        } else {
-            forward.any_orthonormal_vector()
-        };
-        Camera {
-            position: self.eye.to_array(),
-            target: self.center.to_array(),
-            up: up.to_array(),
-            fov_y_deg: (2.0 * half).to_degrees() * 1.02,
-            width: self.size,
-            height: self.size,
-        }
+    /// The distances along the view direction that hold the sphere (near, far).
+    pub fn planes(&self) -> (f64, f64) {
+        let b = self.camera.basis();
+        let z = (self.center - self.eye()).dot(b.forward);
+        let r = self.radius * 1.05;
+        ((z - r).max(z * 1e-3), z + r)
     }
 
-    /// The quad the texture is drawn on: its centre (the sphere's) and the half-extent
-    /// vectors along the sample camera's right and up, so that the sample camera's
-    /// image maps exactly onto it.
+    /// The clip-space map taking the camera's whole image to the rectangle (applied
+    /// after its projection, `crop * proj * view`), column-major.
+    pub fn crop(&self) -> [[f32; 4]; 4] {
+        let (w, h) = (f64::from(self.camera.width), f64::from(self.camera.height));
+        let [x0, y0, rw, rh] = self.rect;
+        let (ax, bx) = (w / rw, (w - 2.0 * x0) / rw - 1.0);
+        let (ay, by) = (h / rh, 1.0 - h / rh + 2.0 * y0 / rh);
+        [
+            [ax as f32, 0.0, 0.0, 0.0],
+            [0.0, ay as f32, 0.0, 0.0],
+            [0.0, 0.0, 1.0, 0.0],
+            [bx as f32, by as f32, 0.0, 1.0],
+        ]
+    }
+
+    /// The quad the texture is drawn on: the rectangle's slice of the camera's
+    /// frustum on the plane through the sphere's centre facing the view direction
+    /// (its centre, and the half-extent vectors along the image's right and up), so
+    /// that from the sampling eye the texture maps exactly onto it.
     pub fn quad(&self) -> (DVec3, DVec3, DVec3) {
-        let cam = self.camera();
-        let b = cam.basis();
-        let d = (self.center - self.eye).length();
-        let h = d * (0.5 * cam.fov_y_deg.to_radians()).tan();
-        (self.center, b.right * h, b.up * h)
+        let b = self.camera.basis();
+        let eye = self.eye();
+        let z = (self.center - eye).dot(b.forward);
+        let (w, h) = (f64::from(self.camera.width), f64::from(self.camera.height));
+        let scale = self.camera.projection_scale_px();
+        let [x0, y0, rw, rh] = self.rect;
+        let (mx, my) = (x0 + rw * 0.5 - w * 0.5, h * 0.5 - (y0 + rh * 0.5));
+        let center = eye + b.forward * z + b.right * (mx / scale * z) + b.up * (my / scale * z);
+        (
+            center,
+            b.right * (rw * 0.5 / scale * z),
+            b.up * (rh * 0.5 / scale * z),
+        )
     }
 }
 
@@ -216,12 +274,6 @@ impl Impostors {
         radius / (d * d - radius * radius).sqrt() * camera.projection_scale_px()
     }
 
-    fn size_for(&self, radius_px: f64) -> u32 {
-        let want = (2.0 * radius_px).ceil().max(1.0) as u32;
-        want.next_power_of_two()
-            .clamp(self.options.min_size, self.options.max_size)
-    }
-
     fn held_bytes(&self) -> u64 {
         self.slots
             .iter()
@@ -253,17 +305,17 @@ impl Impostors {
     pub fn within_bound(&self, sample: &ImpostorSample, camera: &Camera) -> bool {
         let eye = DVec3::from(camera.position);
         let (a, b) = (
-            (sample.eye - sample.center).normalize_or_zero(),
+            (sample.eye() - sample.center).normalize_or_zero(),
             (eye - sample.center).normalize_or_zero(),
         );
         let angle = a.dot(b).clamp(-1.0, 1.0).acos();
         let r_px = Self::radius_px(camera, sample.center, sample.radius);
-        let size = 2.0 * r_px;
         let scale = self.options.resample_scale;
-        let size_ok = (size <= f64::from(sample.size) * scale
-            || sample.size >= self.options.max_size)
-            && (size * scale >= f64::from(sample.size) || sample.size <= self.options.min_size);
-        r_px * angle <= self.options.max_error_px && size_ok
+        let size_ok = r_px <= sample.radius_px * scale && r_px * scale >= sample.radius_px;
+        // The camera's image size changed: the texels no longer match its pixels.
+        let same_image =
+            camera.width == sample.camera.width && camera.height == sample.camera.height;
+        r_px * angle <= self.options.max_error_px && size_ok && same_image
     }
 
     /// Decides this frame for `camera` over the models' `spheres` (world coordinates):
@@ -296,27 +348,31 @@ impl Impostors {
             })
             .collect();
         order.sort_by(|a, b| b.2.cmp(&a.2).then(a.1.total_cmp(&b.1)));
-        let eye = DVec3::from(camera.position);
-        let up = camera.basis().up;
         for (i, r_px, stale) in order {
             let s = spheres[i];
             let state = self.states[i].clone();
             let far = o.enabled && s.visible && r_px < o.max_radius_px;
             let near = !o.enabled || !s.visible || r_px > o.max_radius_px * o.hysteresis;
-            let sample = ImpostorSample {
-                eye,
-                up,
+            let sample = ImpostorSample::new(camera, s.center, s.radius, o.max_size);
+            // Not wholly in front of the eye: geometry.
+            let far = far && sample.is_some();
+            let near = near || sample.is_none();
+            let sample = sample.unwrap_or_else(|| ImpostorSample {
+                camera: camera.clone(),
+                rect: [0.0, 0.0, 1.0, 1.0],
+                size: [1, 1],
                 center: s.center,
                 radius: s.radius,
-                size: self.size_for(r_px),
-            };
+                radius_px: r_px,
+            });
+            let bytes = sample.bytes();
             let can_sample = |me: &Self| {
                 me.to_sample.len() < o.max_samples_per_frame
-                    && me.held_bytes() + sample.bytes() <= o.max_texture_bytes
+                    && me.held_bytes() + bytes <= o.max_texture_bytes
             };
             self.states[i] = match state {
                 State::Geometry if far && can_sample(self) => {
-                    let slot = self.new_slot(sample);
+                    let slot = self.new_slot(sample.clone());
                     self.to_sample.push((i, slot));
                     State::Dissolve {
                         from: None,
@@ -331,7 +387,7 @@ impl Impostors {
                     // error bound at most (a dissolve between them would only show
                     // the dither).
                     self.slots[slot].in_use = false;
-                    let to = self.new_slot(sample);
+                    let to = self.new_slot(sample.clone());
                     self.to_sample.push((i, to));
                     State::Impostor(to)
                 }
@@ -342,7 +398,7 @@ impl Impostors {
                 State::Dissolve { from, to, t } => {
                     // A texture out of its bound mid-dissolve is taken again (the eye
                     // moves fast): the dissolve goes on from an exact picture.
-                    let to = self.refresh(i, to, stale, sample, can_sample(self));
+                    let to = self.refresh(i, to, stale, &sample, can_sample(self));
                     if near {
                         // Turned back before the end: back to geometry from the new one.
                         if let Some(f) = from {
@@ -362,7 +418,7 @@ impl Impostors {
                     }
                 }
                 State::Back { from, t } => {
-                    let from = self.refresh(i, from, stale, sample, can_sample(self));
+                    let from = self.refresh(i, from, stale, &sample, can_sample(self));
                     if far {
                         State::Dissolve {
                             from: None,
@@ -400,14 +456,14 @@ impl Impostors {
         i: usize,
         slot: usize,
         stale: bool,
-        sample: ImpostorSample,
+        sample: &ImpostorSample,
         can_sample: bool,
     ) -> usize {
         if !(stale && can_sample) {
             return slot;
         }
         self.slots[slot].in_use = false;
-        let to = self.new_slot(sample);
+        let to = self.new_slot(sample.clone());
         self.to_sample.push((i, to));
         to
     }
@@ -440,15 +496,6 @@ impl Impostors {
     /// The front end has rendered texture `slot`.
     pub fn sampled(&mut self, slot: usize) {
         self.slots[slot].ready = true;
-    }
-
-    /// Whether model `i` needs its geometry this frame (drawn, or about to be: a model
-    /// shown by texture alone needs no selection or patches).
-    pub fn needs_geometry(&self, i: usize) -> bool {
-        !matches!(
-            self.states.get(i),
-            Some(State::Impostor(_)) | Some(State::Dissolve { from: Some(_), .. })
-        )
     }
 
     /// What model `i` draws this frame (after [`Impostors::update`] and the samples).
@@ -569,12 +616,10 @@ mod tests {
             .iter()
             .all(|d| d.geometry.is_none() && d.textures.len() == 1));
         assert_eq!(p.stats().impostors, 1);
-        assert!(!p.needs_geometry(0));
-        assert_eq!(
-            p.stats().texture_bytes,
-            16 * 16 * 4,
-            "~7.7 px radius: a 16-texel side"
-        );
+        // About 2 r + 4 texels a side: the rectangle the sphere covers.
+        let side = u64::from(p.sample(0).size[0]);
+        assert!((16..=24).contains(&side), "~7.7 px radius: {side} texels");
+        assert_eq!(p.stats().texture_bytes, side * side * 4);
         // Near again: back to geometry over the same number of frames.
         let back = run(&mut p, &cam(3.0, 0.0, 0.0), frames + 2);
         assert!(back[0].geometry.is_some() && !back[0].textures.is_empty());
@@ -625,7 +670,7 @@ mod tests {
     #[test]
     fn the_texture_budget_keeps_models_as_geometry() {
         let o = ImpostorOptions {
-            max_texture_bytes: 16 * 16 * 4,
+            max_texture_bytes: 24 * 24 * 4,
             ..Default::default()
         };
         let mut p = Impostors::new(o, 2);
@@ -643,7 +688,7 @@ mod tests {
         ];
         p.update(&cam(100.0, 0.0, 0.0), &spheres);
         assert_eq!(p.stats().sampling, 1, "one texture fits");
-        assert!(p.stats().texture_bytes <= 16 * 16 * 4);
+        assert!(p.stats().texture_bytes <= 24 * 24 * 4);
         // Disabled: everything geometry.
         let mut off = Impostors::new(
             ImpostorOptions {

@@ -305,6 +305,8 @@ impl Running {
                     enabled: args.morph,
                     ..Default::default()
                 },
+                impostors: (args.impostors && models.len() > 1)
+                    .then(tessera_render::ImpostorOptions::default),
                 ..Default::default()
             },
         )?;
@@ -536,6 +538,7 @@ impl Running {
             })
             .collect();
         let info = hud::Info {
+            impostors: self.viewer.impostor_stats(),
             models: &models_info,
             adapter: &adapter,
             stats: &self.stats,

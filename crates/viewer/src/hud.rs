@@ -118,6 +118,8 @@ pub struct Info<'a> {
     /// point, where they are in front of the camera.
     pub measure_screen: Vec<egui::Pos2>,
     pub picked_screen: Option<egui::Pos2>,
+    /// The impostors' figures (None: off).
+    pub impostors: Option<tessera_render::ImpostorStats>,
 }
 
 fn mib(b: u64) -> f64 {
@@ -221,6 +223,17 @@ pub fn draw(ctx: &egui::Context, hud: &mut Hud, info: &Info) -> Vec<Action> {
                 ui.label("read");
                 ui.label(format!("{:.1} MiB/s", info.bytes_read_per_s / 1048576.0));
                 ui.end_row();
+                if let Some(im) = &info.impostors {
+                    ui.label("impostors");
+                    ui.label(format!(
+                        "{} drawn, {} dissolving, {:.1} MiB, {} triangles saved",
+                        im.impostors,
+                        im.transitioning,
+                        mib(im.texture_bytes),
+                        im.triangles_saved
+                    ));
+                    ui.end_row();
+                }
                 if s.failed_patches > 0 {
                     ui.label("failed patches");
                     ui.label(format!("{} (parents drawn)", s.failed_patches));

@@ -48,6 +48,8 @@ pub struct ViewArgs {
     pub prefetch: bool,
     /// Geomorphing between levels (`--no-morph` turns it off; G and the HUD toggle it).
     pub morph: bool,
+    /// Texture impostors for a scene's distant models (docs/impostors.md).
+    pub impostors: bool,
     /// Window size (inner, physical pixels).
     pub width: u32,
     pub height: u32,
