@@ -95,6 +95,11 @@ pub struct Args {
     /// benchmarks' control).
     #[arg(long, default_value_t = 8, value_name = "N", hide = true)]
     impostor_transition_frames: u32,
+    /// A frame time to hold, milliseconds: while frames are slower, more of a scene's
+    /// models become impostors (the --impostor-px threshold grows), while they are
+    /// much faster, fewer.
+    #[arg(long, value_name = "MS")]
+    frame_budget_ms: Option<f64>,
     /// The impostors' parallax error bound, pixels (a texture is sampled again past it).
     #[arg(long, default_value_t = 1.5, value_name = "PX")]
     impostor_error_px: f64,
@@ -116,6 +121,11 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     }
     if !(a.impostor_px.is_finite() && a.impostor_px >= 0.0) {
         bail!("--impostor-px must be a number of pixels, 0 or more");
+    }
+    if a.frame_budget_ms
+        .is_some_and(|b| !(b.is_finite() && b > 0.0))
+    {
+        bail!("--frame-budget-ms must be a positive number of milliseconds");
     }
     if !(a.impostor_error_px.is_finite() && a.impostor_error_px > 0.0) {
         bail!("--impostor-error-px must be a positive number of pixels");
@@ -149,6 +159,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
             max_radius_px: a.impostor_px,
             transition_frames: a.impostor_transition_frames.max(1),
             max_error_px: a.impostor_error_px,
+            frame_budget_ms: a.frame_budget_ms,
             ..Default::default()
         });
     }

@@ -415,6 +415,9 @@ impl Viewer {
         self.gpu.wait_idle()?;
         self.last_camera = Some(camera.clone());
         stats.frame_ms = t0.elapsed().as_secs_f64() * 1e3;
+        if let Some((policy, _)) = &mut self.impostors {
+            policy.frame_took(stats.frame_ms);
+        }
         Ok(stats)
     }
 

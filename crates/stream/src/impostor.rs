@@ -25,8 +25,8 @@
 //! Transitions are dissolves over `transition_frames` frames, never a one-frame swap:
 //! each pixel of the region shows either the geometry or the texture, by a per-pixel
 //! threshold (a dither) against the transition's progress, so the share of texture
-//! pixels grows smoothly from 0 to 1 (and back). A re-sample replaces the texture at
-//! once: old and new differ by the error bound at most.
+//! pixels grows smoothly from 0 to 1 (and back); a re-sample dissolves from the old
+//! texture to the new one the same way.
 
 use glam::DVec3;
 use tessera_select::Camera;
@@ -53,6 +53,11 @@ pub struct ImpostorOptions {
     pub max_samples_per_frame: usize,
     /// Frames a dissolve takes.
     pub transition_frames: u32,
+    /// A frame time to hold (milliseconds): while frames take longer, more models
+    /// become impostors (the radius threshold grows, up to `max_radius_limit_px`);
+    /// while they take under 60% of it, fewer (down to `max_radius_px`).
+    pub frame_budget_ms: Option<f64>,
+    pub max_radius_limit_px: f64,
 }
 
 impl Default for ImpostorOptions {
@@ -67,6 +72,8 @@ impl Default for ImpostorOptions {
             max_texture_bytes: 64 << 20,
             max_samples_per_frame: 48,
             transition_frames: 8,
+            frame_budget_ms: None,
+            max_radius_limit_px: 400.0,
         }
     }
 }
@@ -232,11 +239,16 @@ pub struct ImpostorStats {
     /// Triangles of the cuts not drawn because a texture stands in (the front end's
     /// count).
     pub triangles_saved: u64,
+    /// The projected radius below which models become impostors now, pixels.
+    pub threshold_px: f64,
 }
 
 /// The impostor policy of a scene. See the module docs.
 pub struct Impostors {
     pub options: ImpostorOptions,
+    /// The radius threshold in force (`options.max_radius_px`, raised by the frame
+    /// budget).
+    threshold_px: f64,
     states: Vec<State>,
     slots: Vec<Slot>,
     /// Slots to sample (the front end's work list for this frame).
@@ -256,11 +268,27 @@ pub struct ModelSphere {
 impl Impostors {
     pub fn new(options: ImpostorOptions, models: usize) -> Impostors {
         Impostors {
+            threshold_px: options.max_radius_px,
             options,
             states: vec![State::Geometry; models],
             slots: Vec::new(),
             to_sample: Vec::new(),
             stats: ImpostorStats::default(),
+        }
+    }
+
+    /// The last frame took `ms`: with a frame budget, the threshold follows (see
+    /// [`ImpostorOptions::frame_budget_ms`]).
+    pub fn frame_took(&mut self, ms: f64) {
+        let Some(budget) = self.options.frame_budget_ms else {
+            return;
+        };
+        let base = self.options.max_radius_px;
+        let limit = self.options.max_radius_limit_px.max(base);
+        if ms > budget {
+            self.threshold_px = (self.threshold_px.max(1.0) * 1.15).min(limit);
+        } else if ms < 0.6 * budget {
+            self.threshold_px = (self.threshold_px / 1.1).max(base);
         }
     }
 
@@ -326,7 +354,8 @@ impl Impostors {
         if self.states.len() != spheres.len() {
             self.states.resize(spheres.len(), State::Geometry);
         }
-        let o = self.options.clone();
+        let mut o = self.options.clone();
+        o.max_radius_px = self.threshold_px;
         let frames = o.transition_frames.max(1);
         // Textures out of their bound first (they show wrong until re-sampled), then the
         // smallest models first: when the samples of a frame or the texture memory run
@@ -383,13 +412,15 @@ impl Impostors {
                 State::Geometry => State::Geometry,
                 State::Impostor(slot) if near => State::Back { from: slot, t: 0 },
                 State::Impostor(slot) if stale && can_sample(self) => {
-                    // The new texture replaces the old at once: the two differ by the
-                    // error bound at most (a dissolve between them would only show
-                    // the dither).
-                    self.slots[slot].in_use = false;
+                    // The new texture dissolves in over the old: the two differ by the
+                    // error bound, spread over the transition's frames.
                     let to = self.new_slot(sample.clone());
                     self.to_sample.push((i, to));
-                    State::Impostor(to)
+                    State::Dissolve {
+                        from: Some(slot),
+                        to,
+                        t: 0,
+                    }
                 }
                 // Out of its bound with no sample left this frame: the geometry comes
                 // back (dissolving) rather than a texture showing wrong.
@@ -435,6 +466,7 @@ impl Impostors {
             };
         }
         let mut st = ImpostorStats {
+            threshold_px: self.threshold_px,
             sampling: self.to_sample.len() as u32,
             texture_bytes: self.held_bytes(),
             ..Default::default()
@@ -647,7 +679,7 @@ mod tests {
         );
         assert_eq!(p.stats().sampling, 0);
         assert_eq!(p.stats().impostors, 1);
-        // Past it: a new texture, in place of the old at once.
+        // Past it: a new texture, dissolved into from the old.
         let big = 3.0 / r_px;
         let c = cam(100.0 * big.cos(), 100.0 * big.sin(), 0.0);
         p.update(&c, &sphere());
@@ -655,16 +687,39 @@ mod tests {
         let (_, slot) = p.to_sample()[0];
         p.sampled(slot);
         let d = p.draw(0);
-        assert!(
-            d.geometry.is_none() && d.textures == vec![(slot, [0.0, 1.0])],
-            "{d:?}"
-        );
+        assert!(d.geometry.is_none() && d.textures.len() == 2, "{d:?}");
         assert!(p.within_bound(p.sample(slot), &c));
-        assert_eq!(
-            p.stats().texture_bytes,
-            p.sample(slot).bytes(),
-            "the old one is given back"
-        );
+        // Once dissolved, the old texture is given back.
+        let frames = p.options.transition_frames as usize;
+        run(&mut p, &c, frames);
+        assert_eq!(p.stats().texture_bytes, p.sample(slot).bytes());
+    }
+
+    #[test]
+    fn a_frame_budget_raises_the_threshold_while_frames_are_slow() {
+        let o = ImpostorOptions {
+            frame_budget_ms: Some(33.0),
+            ..Default::default()
+        };
+        let mut p = Impostors::new(o, 1);
+        // 1 unit at 30 units: ~26 px, above no threshold yet (40 px): an impostor.
+        // At 15 units (~52 px) geometry, until slow frames raise the threshold.
+        let c = cam(15.0, 0.0, 0.0);
+        run(&mut p, &c, 2);
+        assert_eq!(p.stats().impostors + p.stats().transitioning, 0);
+        for _ in 0..10 {
+            p.frame_took(80.0);
+        }
+        run(&mut p, &c, 12);
+        assert!(p.stats().threshold_px > 52.0, "{:?}", p.stats());
+        assert_eq!(p.stats().impostors, 1);
+        // Fast frames bring it back down to the configured one (and the model back).
+        for _ in 0..40 {
+            p.frame_took(5.0);
+        }
+        run(&mut p, &c, 12);
+        assert_eq!(p.stats().threshold_px, 40.0);
+        assert_eq!(p.stats().impostors, 0);
     }
 
     #[test]
@@ -698,6 +753,10 @@ mod tests {
             2,
         );
         off.update(&cam(100.0, 0.0, 0.0), &spheres);
-        assert_eq!(off.stats(), ImpostorStats::default());
+        let s = off.stats();
+        assert_eq!(
+            (s.impostors, s.transitioning, s.sampling, s.texture_bytes),
+            (0, 0, 0, 0)
+        );
     }
 }
