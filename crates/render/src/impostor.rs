@@ -171,8 +171,7 @@ impl ImpostorRenderer {
     }
 
     /// The colour and depth views to sample slot `slot` into, `size` texels (its
-    /// texture made or remade to that size; depth buffers are kept per size, at most
-    /// a few: the largest sizes are kept).
+    /// texture made or remade to that size; a depth buffer is kept per size).
     pub fn target(
         &mut self,
         device: &wgpu::Device,
@@ -221,10 +220,7 @@ impl ImpostorRenderer {
             });
         }
         if !self.depths.iter().any(|(s, _, _)| *s == size) {
-            // Sizes vary with every model's projection: keep the last few.
-            if self.depths.len() >= 8 {
-                self.depths.remove(0);
-            }
+            // Sides come in steps of 16 texels (`ImpostorSample::new`): a few sizes.
             let (texture, view) = crate::renderer::create_depth_texture(device, size[0], size[1]);
             self.depths.push((size, view, texture));
         }
@@ -234,6 +230,19 @@ impl ImpostorRenderer {
             .iter()
             .find(|(s, _, _)| *s == size)
             .expect("made above")
+            .1;
+        (color, depth)
+    }
+
+    /// The views of slot `slot`'s texture and a depth buffer of its size, made by
+    /// [`ImpostorRenderer::target`].
+    pub fn views(&self, slot: usize, size: [u32; 2]) -> (&wgpu::TextureView, &wgpu::TextureView) {
+        let color = &self.targets[slot].as_ref().expect("made by target").view;
+        let depth = &self
+            .depths
+            .iter()
+            .find(|(s, _, _)| *s == size)
+            .expect("made by target")
             .1;
         (color, depth)
     }

@@ -207,7 +207,7 @@ impl Viewer {
         renderer.set_base_vertex(gpu.base_vertex());
         renderer.has_colors = models[0].0.index().header().attributes & ATTR_COLORS != 0;
         renderer.texel_blend = opts.texel_blend;
-        // One entry a model, and one to sample impostors with.
+        // One entry a model (and, with impostors, one a sample of a frame).
         renderer.ensure_models(&gpu.device, models.len() as u32 + 1);
         let mut cache = GpuCache::new(&gpu.device, opts.gpu_budget_bytes);
         let mut driver = Driver::new(SceneBudgets::new(
@@ -559,10 +559,20 @@ impl Viewer {
                 let (center, radius) = m
                     .placement()
                     .sphere_to_world(glam::DVec3::new(b[0], b[1], b[2]), b[3]);
+                // The cut drawn now (FNV-1a over its nodes): a texture of another one
+                // is sampled again.
+                let cut = m
+                    .scheduler
+                    .draw()
+                    .iter()
+                    .fold(0xcbf2_9ce4_8422_2325u64, |h, &n| {
+                        (h ^ u64::from(n)).wrapping_mul(0x0100_0000_01b3)
+                    });
                 ModelSphere {
                     center,
                     radius,
                     visible: m.is_visible(),
+                    cut,
                 }
             })
             .collect();
@@ -572,9 +582,15 @@ impl Viewer {
                 gpu_side.release(slot);
             }
         }
-        let scratch = self.models.len() as u32;
-        for &(i, slot) in policy.to_sample().to_vec().iter() {
-            let sample = policy.sample(slot).clone();
+        // Every sample of the frame in one submission: each its own uniform entry past
+        // the models'.
+        let samples = policy.to_sample().to_vec();
+        self.renderer.ensure_models(
+            &self.gpu.device,
+            (self.models.len() + samples.len().max(1)) as u32,
+        );
+        for (k, &(i, slot)) in samples.iter().enumerate() {
+            let sample = policy.sample(slot);
             let driven = self.driver.model(i);
             // The frame's own camera over the sphere's rectangle of the image: at the
             // sampling eye the texels are the frame's pixels.
@@ -582,40 +598,50 @@ impl Viewer {
             let origin = self.models[i].model.index().header().cube_origin;
             let mut params = FrameParams::with_planes(&camera, origin, planes, self.opts.shading);
             params.view_proj = glam::Mat4::from_cols_array_2d(&sample.crop()) * params.view_proj;
+            let entry = (self.models.len() + k) as u32;
             self.renderer.set_model_frame(
                 &self.gpu.queue,
-                scratch,
+                entry,
                 &params,
                 self.models[i].has_colors,
             );
-            let (color, depth) = gpu_side.target(&self.gpu.device, slot, sample.size);
+            gpu_side.target(&self.gpu.device, slot, sample.size);
+        }
+        if !samples.is_empty() {
             let mut enc = self
                 .gpu
                 .device
                 .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                    label: Some("tessera impostor sample"),
+                    label: Some("tessera impostor samples"),
                 });
-            let cache = &self.cache;
-            let nodes = driven.scheduler.draw();
-            let ratios = driven.scheduler.morph_ratios();
-            let slots = nodes.iter().enumerate().filter_map(|(k, &n)| {
-                let ratio = ratios.get(k).copied().unwrap_or(0.0);
-                cache.slot_of(i as u32, n).map(|s| (scratch, s, ratio))
-            });
             let background = self.renderer.background;
             self.renderer.background = [0.0; 4];
-            self.renderer.encode_models_pass(
-                &self.gpu.device,
-                &mut enc,
-                color,
-                depth,
-                cache,
-                slots,
-                true,
-            );
+            for (k, &(i, slot)) in samples.iter().enumerate() {
+                let driven = self.driver.model(i);
+                let entry = (self.models.len() + k) as u32;
+                let (color, depth) = gpu_side.views(slot, policy.sample(slot).size);
+                let cache = &self.cache;
+                let nodes = driven.scheduler.draw();
+                let ratios = driven.scheduler.morph_ratios();
+                let slots = nodes.iter().enumerate().filter_map(|(j, &n)| {
+                    let ratio = ratios.get(j).copied().unwrap_or(0.0);
+                    cache.slot_of(i as u32, n).map(|s| (entry, s, ratio))
+                });
+                self.renderer.encode_models_pass(
+                    &self.gpu.device,
+                    &mut enc,
+                    color,
+                    depth,
+                    cache,
+                    slots,
+                    true,
+                );
+            }
             self.renderer.background = background;
             self.gpu.queue.submit([enc.finish()]);
-            policy.sampled(slot);
+            for &(_, slot) in &samples {
+                policy.sampled(slot);
+            }
         }
         let mut quads = Vec::new();
         let mut saved = 0;

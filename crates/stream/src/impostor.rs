@@ -81,7 +81,8 @@ impl Default for ImpostorOptions {
 /// How a texture was taken: with the frame's own camera, over the rectangle of the
 /// image the model's sphere covers, so that at the sampling eye its texels are the
 /// frame's pixels (the same rasterisation, not a resampled picture); `size` texels (the
-/// rectangle's pixels, scaled down to fit `max_size` if it is larger).
+/// rectangle's pixels, scaled down to fit `max_size` if it is larger; sides in steps of
+/// 16).
 #[derive(Clone, Debug, PartialEq)]
 pub struct ImpostorSample {
     /// The frame camera it was taken with (world coordinates).
@@ -93,6 +94,8 @@ pub struct ImpostorSample {
     pub radius: f64,
     /// The sphere's projected radius then, pixels.
     pub radius_px: f64,
+    /// The cut it shows ([`ModelSphere::cut`] then).
+    pub cut: u64,
 }
 
 impl ImpostorSample {
@@ -119,11 +122,12 @@ impl ImpostorSample {
         let r_px = Impostors::radius_px(camera, center, radius);
         let half = r_px * (1.0 + 0.5 * ((cx - w * 0.5).hypot(cy - h * 0.5) / scale).powi(2)) + 2.0;
         let (x0, y0) = ((cx - half).floor(), (cy - half).floor());
+        // Sides in steps of 16 pixels (a front end keeps a depth buffer a size).
         let side = ((cx + half).ceil() - x0)
             .max((cy + half).ceil() - y0)
             .max(1.0);
-        let k = (side / f64::from(max_size.max(1))).max(1.0);
-        let texels = (side / k).ceil().max(1.0) as u32;
+        let side = (side / 16.0).ceil() * 16.0;
+        let texels = side.min(f64::from(max_size.max(16) / 16 * 16)) as u32;
         Some(ImpostorSample {
             camera: camera.clone(),
             rect: [x0, y0, side, side],
@@ -131,6 +135,7 @@ impl ImpostorSample {
             center,
             radius,
             radius_px: r_px,
+            cut: 0,
         })
     }
 
@@ -263,6 +268,10 @@ pub struct ModelSphere {
     pub radius: f64,
     /// Shown at all (a hidden model is neither).
     pub visible: bool,
+    /// A signature of the cut the model draws now (the front end's: a hash of its
+    /// nodes): a texture sampled from another cut (coarser nodes while it streamed in)
+    /// is sampled again.
+    pub cut: u64,
 }
 
 impl Impostors {
@@ -364,12 +373,13 @@ impl Impostors {
         let mut order: Vec<(usize, f64, bool)> = spheres
             .iter()
             .enumerate()
-            .map(|(i, s)| {
+            .map(|(i, &s)| {
                 let stale = match self.states[i] {
                     State::Impostor(slot)
                     | State::Dissolve { to: slot, .. }
                     | State::Back { from: slot, .. } => {
-                        !self.within_bound(&self.slots[slot].sample, camera)
+                        let sample = &self.slots[slot].sample;
+                        !self.within_bound(sample, camera) || sample.cut != s.cut
                     }
                     State::Geometry => false,
                 };
@@ -382,7 +392,11 @@ impl Impostors {
             let state = self.states[i].clone();
             let far = o.enabled && s.visible && r_px < o.max_radius_px;
             let near = !o.enabled || !s.visible || r_px > o.max_radius_px * o.hysteresis;
-            let sample = ImpostorSample::new(camera, s.center, s.radius, o.max_size);
+            let sample =
+                ImpostorSample::new(camera, s.center, s.radius, o.max_size).map(|mut x| {
+                    x.cut = s.cut;
+                    x
+                });
             // Not wholly in front of the eye: geometry.
             let far = far && sample.is_some();
             let near = near || sample.is_none();
@@ -393,6 +407,7 @@ impl Impostors {
                 center: s.center,
                 radius: s.radius,
                 radius_px: r_px,
+                cut: s.cut,
             });
             let bytes = sample.bytes();
             let can_sample = |me: &Self| {
@@ -602,6 +617,7 @@ mod tests {
             center: DVec3::ZERO,
             radius: 1.0,
             visible: true,
+            cut: 7,
         }]
     }
 
@@ -648,9 +664,9 @@ mod tests {
             .iter()
             .all(|d| d.geometry.is_none() && d.textures.len() == 1));
         assert_eq!(p.stats().impostors, 1);
-        // About 2 r + 4 texels a side: the rectangle the sphere covers.
+        // About 2 r + 4 texels a side (the rectangle the sphere covers), in 16s.
         let side = u64::from(p.sample(0).size[0]);
-        assert!((16..=24).contains(&side), "~7.7 px radius: {side} texels");
+        assert_eq!(side, 32, "~7.7 px radius");
         assert_eq!(p.stats().texture_bytes, side * side * 4);
         // Near again: back to geometry over the same number of frames.
         let back = run(&mut p, &cam(3.0, 0.0, 0.0), frames + 2);
@@ -696,6 +712,20 @@ mod tests {
     }
 
     #[test]
+    fn a_texture_of_another_cut_is_sampled_again() {
+        let mut p = Impostors::new(ImpostorOptions::default(), 1);
+        let c = cam(100.0, 0.0, 0.0);
+        run(&mut p, &c, 10);
+        assert_eq!(p.stats().sampling, 0);
+        // The model's cut refined (more of it streamed in): a new sample.
+        let mut refined = sphere();
+        refined[0].cut = 8;
+        p.update(&c, &refined);
+        assert_eq!(p.stats().sampling, 1);
+        assert_eq!(p.sample(p.to_sample()[0].1).cut, 8);
+    }
+
+    #[test]
     fn a_frame_budget_raises_the_threshold_while_frames_are_slow() {
         let o = ImpostorOptions {
             frame_budget_ms: Some(33.0),
@@ -725,7 +755,7 @@ mod tests {
     #[test]
     fn the_texture_budget_keeps_models_as_geometry() {
         let o = ImpostorOptions {
-            max_texture_bytes: 24 * 24 * 4,
+            max_texture_bytes: 32 * 32 * 4,
             ..Default::default()
         };
         let mut p = Impostors::new(o, 2);
@@ -734,16 +764,18 @@ mod tests {
                 center: DVec3::ZERO,
                 radius: 1.0,
                 visible: true,
+                cut: 1,
             },
             ModelSphere {
                 center: DVec3::new(0.0, 5.0, 0.0),
                 radius: 1.0,
                 visible: true,
+                cut: 1,
             },
         ];
         p.update(&cam(100.0, 0.0, 0.0), &spheres);
         assert_eq!(p.stats().sampling, 1, "one texture fits");
-        assert!(p.stats().texture_bytes <= 24 * 24 * 4);
+        assert!(p.stats().texture_bytes <= 32 * 32 * 4);
         // Disabled: everything geometry.
         let mut off = Impostors::new(
             ImpostorOptions {
