@@ -1,8 +1,8 @@
 //! Issue 36: `mpirun -n N tessera build --mpi` under a real MPI (Open MPI): the model is
-//! the single process's byte for byte for N = 1, 2, 3; a rank that dies stops the job
-//! with a clear message and nothing written; bad input gives every rank the single
-//! process's error. Built only with `--features mpi` (`scripts/test` runs it so); skips,
-//! loudly, where mpirun is missing.
+//! the single process's byte for byte for N = 1, 2, 3 (a sphere, the bunny; N = 2 on a
+//! textured scan); a rank that dies stops the job with a clear message and nothing
+//! written; bad input gives every rank the single process's error. Built only with
+//! `--features mpi` (`scripts/test` runs it so); skips, loudly, where mpirun is missing.
 #![cfg(feature = "mpi")]
 
 use std::path::{Path, PathBuf};
@@ -67,13 +67,14 @@ fn sphere(dir: &Path) -> PathBuf {
     p
 }
 
-fn bunny() -> Option<PathBuf> {
-    let p = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data/bunny.obj"));
+/// A file of `../shared/data`, or `None` (said) when it is absent.
+fn shared(name: &str) -> Option<PathBuf> {
+    let p = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data")).join(name);
     if !p.exists() {
-        eprintln!("SKIPPED (bunny part): {} is absent", p.display());
+        eprintln!("SKIPPED (that part): {} is absent", p.display());
         return None;
     }
-    Some(p.to_path_buf())
+    Some(p)
 }
 
 /// Files left in `dir` whose names start with a dot: temporary files and directories.
@@ -89,11 +90,19 @@ fn hidden(dir: &Path) -> Vec<String> {
 fn issue_36_mpirun_writes_the_single_process_bytes() {
     let Some(mpirun) = mpirun() else { return };
     let dir = tempfile::tempdir().unwrap();
-    let mut inputs = vec![(sphere(dir.path()), vec!["--leaf-triangles", "1000", "--node-triangles", "500"])];
-    if let Some(b) = bunny() {
-        inputs.push((b, vec![]));
+    let mut inputs = vec![(
+        sphere(dir.path()),
+        vec!["--leaf-triangles", "1000", "--node-triangles", "500"],
+        vec![1, 2, 3],
+    )];
+    if let Some(b) = shared("bunny.obj") {
+        inputs.push((b, vec![], vec![1, 2, 3]));
     }
-    for (input, opts) in &inputs {
+    // Textured (re-cut texels and baked textures travel too): 2 ranks.
+    if let Some(t) = shared("ycb-scissors/textured_simple_reoriented.obj") {
+        inputs.push((t, vec![], vec![2]));
+    }
+    for (input, opts, ranks) in &inputs {
         let input = input.to_str().unwrap();
         let reference = dir.path().join("single.tsr");
         let mut args = vec![input, "-o", reference.to_str().unwrap(), "--quiet"];
@@ -101,7 +110,7 @@ fn issue_36_mpirun_writes_the_single_process_bytes() {
         let r = single(&args);
         assert_eq!(r.code, 0, "{}", r.stderr);
         let reference = std::fs::read(&reference).unwrap();
-        for n in [1, 2, 3] {
+        for &n in ranks {
             let out = dir.path().join(format!("mpi-{n}.tsr"));
             // One thread per rank: 3 ranks share 2 cores here.
             let mut args = vec![input, "-o", out.to_str().unwrap(), "--threads", "1", "--json"];
