@@ -317,6 +317,18 @@ fn print_report(out: &std::path::Path, r: &BuildReport) {
     for (n, s) in &r.stage_seconds {
         println!("    {n:<16} {s:.2} s");
     }
+    for k in &r.ranks {
+        let sum = |f: fn(&tessera_build::LevelStats) -> f64| k.levels.iter().map(f).sum::<f64>();
+        println!(
+            "  rank {:<7} {} diamonds, {:.2} s simplifying, {:.2} s exchanging, {} bytes sent, peak RSS {:.1} MiB",
+            k.rank,
+            sum(|l| l.diamonds as f64),
+            sum(|l| l.work_seconds),
+            sum(|l| l.exchange_seconds),
+            sum(|l| l.bytes_sent as f64),
+            k.peak_rss_bytes as f64 / (1 << 20) as f64
+        );
+    }
     let w = r.degenerate_triangles_removed
         + r.duplicate_triangles_removed
         + r.import.degenerate_faces_skipped
