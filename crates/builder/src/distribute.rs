@@ -233,11 +233,19 @@ pub(crate) fn settle(
         .iter()
         .enumerate()
         .find(|(_, m)| m.first() != Some(&OK))
-        .map(|(from, m)| (from, String::from_utf8_lossy(m.get(1..).unwrap_or(&[])).into_owned()))
+        .map(|(from, m)| {
+            (
+                from,
+                String::from_utf8_lossy(m.get(1..).unwrap_or(&[])).into_owned(),
+            )
+        })
     {
         return Err(match mine {
             Err(own) if from == me => own,
-            _ => BuildError::Peer { rank: from, message: text },
+            _ => BuildError::Peer {
+                rank: from,
+                message: text,
+            },
         });
     }
     mine?;
@@ -258,7 +266,9 @@ pub(crate) fn agree<T>(
         Ok(v) => settle(peers, Ok(vec![Vec::new(); size]), cancelled).map(|_| v),
         Err(e) => match settle(peers, Err(e), cancelled) {
             Err(e) => Err(e),
-            Ok(_) => Err(BuildError::Internal("an error vanished in the exchange".into())),
+            Ok(_) => Err(BuildError::Internal(
+                "an error vanished in the exchange".into(),
+            )),
         },
     }
 }

@@ -8,17 +8,17 @@
 
 use crate::bounds::Sphere;
 use crate::diamond::{self, SimplifyConfig};
+use crate::distribute::{self, LevelStats, Plan, RankStats, Unwire, Wire};
 use crate::import::Imported;
 use crate::partition::{centroid3, parent_id, read_leaf_faces, tet_id, Leaf, Partition, TetId};
 use crate::patch::{
     grid_to_local, remove_bad_triangles_noting, CacheOrder, Welder, WorkPatch, WorkVertex,
 };
+use crate::peers::Peers;
 use crate::recut::{self, ChildTexels, RecutTexture};
 use crate::texture::Baker;
-use crate::timing::{Phase, Phases};
-use crate::distribute::{self, LevelStats, Plan, RankStats, Unwire, Wire};
-use crate::peers::Peers;
 use crate::texture::TextureReport;
+use crate::timing::{Phase, Phases};
 use crate::{BuildError, BuildOptions, BuildReport, Progress};
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
@@ -989,7 +989,8 @@ impl Ctx<'_> {
         self.collapsed_min_edge
             .store(all.collapsed_min_edge.to_bits(), Ordering::Relaxed);
         self.duplicate.store(all.duplicate, Ordering::Relaxed);
-        self.leaf_far2.store(all.leaf_far2.to_bits(), Ordering::Relaxed);
+        self.leaf_far2
+            .store(all.leaf_far2.to_bits(), Ordering::Relaxed);
         self.repaired.store(all.repaired, Ordering::Relaxed);
         *self
             .all_textures

@@ -23,11 +23,11 @@ pub mod diamond;
 mod distribute;
 mod hierarchy;
 pub mod import;
+#[cfg(feature = "mpi")]
+pub mod mpi_peers;
 pub mod partition;
 pub mod patch;
 pub mod peers;
-#[cfg(feature = "mpi")]
-pub mod mpi_peers;
 pub mod recut;
 pub mod texture;
 mod timing;
@@ -432,8 +432,7 @@ fn build_in_pool(
     // Import and partition on every rank; they all learn whether each one succeeded
     // before the hierarchy's exchanges begin.
     let prepared = prepare(input, output, opts, progress, &mut report);
-    let (tmp, imported, part) =
-        distribute::agree(peers, prepared, &|| progress.cancelled())?;
+    let (tmp, imported, part) = distribute::agree(peers, prepared, &|| progress.cancelled())?;
     let t = Instant::now();
     hierarchy::build_hierarchy(
         &imported,

@@ -45,9 +45,8 @@ impl MpiPeers {
     /// Initialises MPI. An error when the process was not started by mpirun in a way
     /// MPI accepts, or MPI cannot serialise calls from several threads.
     pub fn init() -> Result<MpiPeers, String> {
-        let (universe, threading) =
-            mpi::initialize_with_threading(mpi::Threading::Serialized)
-                .ok_or_else(|| "MPI is already initialised".to_string())?;
+        let (universe, threading) = mpi::initialize_with_threading(mpi::Threading::Serialized)
+            .ok_or_else(|| "MPI is already initialised".to_string())?;
         if threading < mpi::Threading::Serialized {
             return Err(format!(
                 "this MPI library offers threading level {threading:?}; the build needs Serialized"
@@ -94,7 +93,10 @@ fn poll<D: ?Sized>(
     cancelled: &dyn Fn() -> bool,
 ) -> Result<(), PeerError> {
     loop {
-        requests = requests.into_iter().filter_map(|r| r.test().err()).collect();
+        requests = requests
+            .into_iter()
+            .filter_map(|r| r.test().err())
+            .collect();
         if requests.is_empty() {
             return Ok(());
         }
@@ -153,7 +155,13 @@ impl Peers for MpiPeers {
         let mut incoming: Vec<Vec<u8>> = incoming_sizes
             .iter()
             .enumerate()
-            .map(|(from, &n)| if from == me { Vec::new() } else { vec![0u8; n as usize] })
+            .map(|(from, &n)| {
+                if from == me {
+                    Vec::new()
+                } else {
+                    vec![0u8; n as usize]
+                }
+            })
             .collect();
         let mut requests = Vec::new();
         for (to, m) in outgoing.iter().enumerate() {
@@ -178,7 +186,11 @@ impl Peers for MpiPeers {
                 requests.push(unsafe {
                     self.world
                         .process_at_rank(from as i32)
-                        .immediate_receive_into_with_tag(StaticScope, forever_mut(piece), tag as i32)
+                        .immediate_receive_into_with_tag(
+                            StaticScope,
+                            forever_mut(piece),
+                            tag as i32,
+                        )
                 });
             }
         }

@@ -187,7 +187,9 @@ mod tests {
                 std::thread::spawn(move || {
                     let mut seen = Vec::new();
                     for round in 0..3u8 {
-                        let out = (0..3).map(|to| vec![p.rank() as u8, to as u8, round]).collect();
+                        let out = (0..3)
+                            .map(|to| vec![p.rank() as u8, to as u8, round])
+                            .collect();
                         seen.push(p.exchange(out, &|| false).unwrap());
                     }
                     (p.rank(), seen)

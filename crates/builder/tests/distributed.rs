@@ -73,7 +73,12 @@ fn issue_36_same_bytes_for_any_rank_count() {
                     let d: u64 = s.levels.iter().map(|l| l.diamonds).sum();
                     assert!(d > 0, "rank {} of {n} simplified nothing", s.rank);
                 }
-                let sent: u64 = report.ranks.iter().flat_map(|s| &s.levels).map(|l| l.bytes_sent).sum();
+                let sent: u64 = report
+                    .ranks
+                    .iter()
+                    .flat_map(|s| &s.levels)
+                    .map(|l| l.bytes_sent)
+                    .sum();
                 assert!(sent > 0);
             }
             assert!(
@@ -95,7 +100,8 @@ struct CancelAfter {
 impl tessera_build::Progress for CancelAfter {
     fn stage(&self, name: &str, _: u64) {
         if name == "simplify diamonds" {
-            self.in_hierarchy.store(true, std::sync::atomic::Ordering::Relaxed);
+            self.in_hierarchy
+                .store(true, std::sync::atomic::Ordering::Relaxed);
         }
     }
     fn advance(&self, n: u64) {
@@ -144,12 +150,46 @@ fn issue_36_one_rank_stopping_stops_all_and_writes_nothing() {
 fn issue_36_bad_input_fails_every_rank_with_the_single_process_error() {
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("bad.ply");
-    std::fs::write(&input, b"ply\nformat ascii 1.0\nelement vertex 3\nend_header\n0 0\n").unwrap();
+    std::fs::write(
+        &input,
+        b"ply\nformat ascii 1.0\nelement vertex 3\nend_header\n0 0\n",
+    )
+    .unwrap();
     let out = dir.path().join("bad.tsr");
-    let single = build(&input, &out, &small(), &NoProgress).unwrap_err().to_string();
+    let single = build(&input, &out, &small(), &NoProgress)
+        .unwrap_err()
+        .to_string();
     let results = run_ranks(2, &input, &out, &small(), |_| Box::new(NoProgress));
     for r in results {
         assert_eq!(r.unwrap_err().to_string(), single);
+    }
+    assert!(!out.exists());
+}
+
+#[test]
+fn issue_36_input_unreadable_on_one_rank_stops_all_with_its_error() {
+    // Why: the ranks read the input each; one that cannot (a node without the mount)
+    // must not leave the others waiting at the first exchange.
+    let dir = tempfile::tempdir().unwrap();
+    let good = sphere(dir.path(), false);
+    let missing = dir.path().join("not-mounted.ply");
+    let out = dir.path().join("never.tsr");
+    let single = build(&missing, &out, &small(), &NoProgress)
+        .unwrap_err()
+        .to_string();
+    let results = std::thread::scope(|s| {
+        let hs: Vec<_> = LocalPeers::group(3)
+            .into_iter()
+            .map(|p| {
+                let input = if p.rank() == 1 { &missing } else { &good };
+                let out = &out;
+                s.spawn(move || build_distributed(input, out, &small(), &NoProgress, &p))
+            })
+            .collect();
+        hs.into_iter().map(|h| h.join().unwrap()).collect::<Vec<_>>()
+    });
+    for (rank, r) in results.into_iter().enumerate() {
+        assert_eq!(r.unwrap_err().to_string(), single, "rank {rank}");
     }
     assert!(!out.exists());
 }
