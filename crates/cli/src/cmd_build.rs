@@ -154,8 +154,9 @@ fn build_mpi(
     quiet: bool,
 ) -> anyhow::Result<Option<BuildReport>> {
     use tessera_build::peers::Peers;
-    let peers = tessera_build::mpi_peers::MpiPeers::init()
-        .map_err(|e| anyhow::anyhow!("--mpi: {e}"))?;
+    crate::progress::install_patient_interrupt_handler();
+    let peers =
+        tessera_build::mpi_peers::MpiPeers::init().map_err(|e| anyhow::anyhow!("--mpi: {e}"))?;
     let rank = peers.rank();
     let bars = Bars::new(quiet || rank != 0);
     let r = tessera_build::build_distributed(input, output, opts, &bars, &peers);

@@ -50,7 +50,12 @@ fn single(args: &[&str]) -> Run {
 /// `mpirun -n N tessera build --mpi ARGS`, with `env` set on every rank.
 fn mpi(mpirun: &Path, n: usize, args: &[&str], env: &[(&str, &str)]) -> Run {
     let mut c = Command::new(mpirun);
-    c.args(["--oversubscribe", "--allow-run-as-root", "-n", &n.to_string()]);
+    c.args([
+        "--oversubscribe",
+        "--allow-run-as-root",
+        "-n",
+        &n.to_string(),
+    ]);
     for (k, v) in env {
         c.env(k, v).args(["-x", k]);
     }
@@ -59,9 +64,14 @@ fn mpi(mpirun: &Path, n: usize, args: &[&str], env: &[(&str, &str)]) -> Run {
 }
 
 fn sphere(dir: &Path) -> PathBuf {
-    let p = dir.join("sphere.ply");
+    sphere_of(dir, "30000")
+}
+
+fn sphere_of(dir: &Path, triangles: &str) -> PathBuf {
+    let p = dir.join(format!("sphere-{triangles}.ply"));
     let mut c = Command::new(TESSERA);
-    c.args(["gen", "sphere", "--triangles", "30000", "--colors", "-o"]).arg(&p);
+    c.args(["gen", "sphere", "--triangles", triangles, "--colors", "-o"])
+        .arg(&p);
     let r = run(c);
     assert_eq!(r.code, 0, "{}", r.stderr);
     p
@@ -113,7 +123,14 @@ fn issue_36_mpirun_writes_the_single_process_bytes() {
         for &n in ranks {
             let out = dir.path().join(format!("mpi-{n}.tsr"));
             // One thread per rank: 3 ranks share 2 cores here.
-            let mut args = vec![input, "-o", out.to_str().unwrap(), "--threads", "1", "--json"];
+            let mut args = vec![
+                input,
+                "-o",
+                out.to_str().unwrap(),
+                "--threads",
+                "1",
+                "--json",
+            ];
             args.extend(opts);
             let r = mpi(&mpirun, n, &args, &[]);
             assert_eq!(r.code, 0, "{n} ranks: {}{}", r.stdout, r.stderr);
@@ -126,7 +143,11 @@ fn issue_36_mpirun_writes_the_single_process_bytes() {
             let ranks = json["ranks"].as_array().unwrap();
             assert_eq!(ranks.len(), if n > 1 { n } else { 0 });
         }
-        assert!(hidden(dir.path()).is_empty(), "left behind: {:?}", hidden(dir.path()));
+        assert!(
+            hidden(dir.path()).is_empty(),
+            "left behind: {:?}",
+            hidden(dir.path())
+        );
     }
 }
 
@@ -167,9 +188,18 @@ fn issue_36_mpirun_a_dying_rank_stops_the_job_and_writes_nothing() {
     let left = hidden(dir.path());
     assert!(left.len() <= 1, "left behind: {left:?}");
     let next = dir.path().join("next.tsr");
-    let r = single(&[input.to_str().unwrap(), "-o", next.to_str().unwrap(), "--quiet"]);
+    let r = single(&[
+        input.to_str().unwrap(),
+        "-o",
+        next.to_str().unwrap(),
+        "--quiet",
+    ]);
     assert_eq!(r.code, 0, "{}", r.stderr);
-    assert!(hidden(dir.path()).is_empty(), "left behind: {:?}", hidden(dir.path()));
+    assert!(
+        hidden(dir.path()).is_empty(),
+        "left behind: {:?}",
+        hidden(dir.path())
+    );
 }
 
 #[test]
@@ -177,7 +207,11 @@ fn issue_36_mpirun_bad_input_gives_the_single_process_error() {
     let Some(mpirun) = mpirun() else { return };
     let dir = tempfile::tempdir().unwrap();
     let bad = dir.path().join("bad.ply");
-    std::fs::write(&bad, b"ply\nformat ascii 1.0\nelement vertex 3\nend_header\n0 0\n").unwrap();
+    std::fs::write(
+        &bad,
+        b"ply\nformat ascii 1.0\nelement vertex 3\nend_header\n0 0\n",
+    )
+    .unwrap();
     let missing = dir.path().join("missing.obj");
     for input in [&bad, &missing] {
         let out = dir.path().join("bad.tsr");
@@ -187,11 +221,72 @@ fn issue_36_mpirun_bad_input_gives_the_single_process_error() {
         let r = mpi(&mpirun, 2, &args, &[]);
         assert_ne!(r.code, 0);
         let error = |s: &str| -> Vec<String> {
-            s.lines().filter(|l| l.starts_with("error:")).map(String::from).collect()
+            s.lines()
+                .filter(|l| l.starts_with("error:"))
+                .map(String::from)
+                .collect()
         };
         // Printed once (by rank 0), the very line one process prints.
         assert_eq!(error(&r.stderr), error(&one.stderr), "{}", r.stderr);
         assert!(!out.exists());
-        assert!(hidden(dir.path()).is_empty(), "left behind: {:?}", hidden(dir.path()));
+        assert!(
+            hidden(dir.path()).is_empty(),
+            "left behind: {:?}",
+            hidden(dir.path())
+        );
     }
+}
+
+#[test]
+fn issue_36_mpirun_a_signalled_rank_stops_every_rank_cleanly() {
+    let Some(mpirun) = mpirun() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    // Big enough that the build is still running when the signal comes (~4 s here).
+    let input = sphere_of(dir.path(), "1000000");
+    let out = dir.path().join("never.tsr");
+    let mut job = Command::new(&mpirun)
+        .args([
+            "--oversubscribe",
+            "--allow-run-as-root",
+            "-n",
+            "2",
+            TESSERA,
+            "build",
+            "--mpi",
+        ])
+        .arg(&input)
+        .arg("-o")
+        .arg(&out)
+        .args(["--threads", "1", "--quiet"])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Rank 0 or 1, whichever mpirun started first: SIGTERM once it runs.
+    let rank_pid = (0..200)
+        .find_map(|_| {
+            std::thread::sleep(std::time::Duration::from_millis(50));
+            let ps = Command::new("ps")
+                .args(["-o", "pid=", "--ppid", &job.id().to_string()])
+                .output()
+                .ok()?;
+            String::from_utf8_lossy(&ps.stdout)
+                .split_whitespace()
+                .next()?
+                .parse::<i32>()
+                .ok()
+        })
+        .expect("mpirun started no rank");
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    // SAFETY: signalling a process of this test's own job.
+    unsafe { libc::kill(rank_pid, libc::SIGTERM) };
+    let o = job.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "the job finished: {stderr}");
+    assert!(stderr.contains("interrupted"), "no clear message: {stderr}");
+    assert!(!out.exists(), "a model was written");
+    assert!(
+        hidden(dir.path()).is_empty(),
+        "left behind: {:?}",
+        hidden(dir.path())
+    );
 }
