@@ -8,13 +8,16 @@
 
 use crate::bounds::Sphere;
 use crate::diamond::{self, SimplifyConfig};
+use crate::distribute::{self, LevelStats, Plan, RankStats, Unwire, Wire};
 use crate::import::Imported;
 use crate::partition::{centroid3, parent_id, read_leaf_faces, tet_id, Leaf, Partition, TetId};
 use crate::patch::{
     grid_to_local, remove_bad_triangles_noting, CacheOrder, Welder, WorkPatch, WorkVertex,
 };
+use crate::peers::Peers;
 use crate::recut::{self, ChildTexels, RecutTexture};
 use crate::texture::Baker;
+use crate::texture::TextureReport;
 use crate::timing::{Phase, Phases};
 use crate::{BuildError, BuildOptions, BuildReport, Progress};
 use rayon::prelude::*;
@@ -22,7 +25,7 @@ use rustc_hash::FxHashMap;
 use std::collections::HashSet;
 use std::fs::File;
 use std::path::Path;
-use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Mutex;
 use tessera_format::{
     encode_patch, write_model_until, Header, NodeRecord, PatchData, PatchSpool, SpooledPatch,
@@ -42,7 +45,9 @@ struct NodeInfo {
     cone: [f32; 4],
     vertex_count: u32,
     triangle_count: u32,
-    diamond: u32,
+    /// Unique per diamond (and per leaf) within the build; renumbered in table order
+    /// when written. A rank's ids are `k * ranks + rank`, so ranks never collide.
+    diamond: u64,
     quant_min: [u32; 3],
     texture_size: [u16; 2],
     /// The builder's patch (until the parent encodes it).
@@ -62,7 +67,10 @@ struct Ctx<'a> {
     work: PatchSpool,
     out: PatchSpool,
     nodes: Mutex<FxHashMap<TetId, NodeInfo>>,
-    diamond_ids: AtomicU32,
+    /// Diamond ids this rank handed out (see [`NodeInfo::diamond`]).
+    diamond_ids: AtomicU64,
+    rank: u64,
+    ranks: u64,
     degenerate: AtomicU64,
     /// Of `degenerate`: triangles with an area in the input, lost to the grid.
     collapsed: AtomicU64,
@@ -84,6 +92,8 @@ struct Ctx<'a> {
     phases: Phases,
     /// The texture stage, for models with [`ATTR_TEXTURE`].
     baker: Option<Baker>,
+    /// Rank 0 of a distributed build: the texture figures of all ranks together.
+    all_textures: Mutex<Option<TextureReport>>,
 }
 
 /// Leaf vertices read from the memory-mapped vertex store between two releases of its
@@ -120,6 +130,10 @@ fn stored(s: &Sphere, scale: f64) -> Sphere {
 impl Ctx<'_> {
     fn internal_err(&self, what: &str) -> BuildError {
         BuildError::Internal(what.to_string())
+    }
+
+    fn next_diamond_id(&self) -> u64 {
+        self.diamond_ids.fetch_add(1, Ordering::Relaxed) * self.ranks + self.rank
     }
 
     fn quantized(&self, v: u32) -> WorkVertex {
@@ -300,7 +314,7 @@ impl Ctx<'_> {
             cone: p.normal_cone(),
             vertex_count: p.vertices.len() as u32,
             triangle_count: p.triangle_count() as u32,
-            diamond: self.diamond_ids.fetch_add(1, Ordering::Relaxed),
+            diamond: self.next_diamond_id(),
             quant_min: quant_min(&p.vertices),
             texture_size: [0, 0],
             work: None,
@@ -655,7 +669,7 @@ impl Ctx<'_> {
         drop(kept);
         lap.mark(Phase::Recut);
         let sat = stored(&Sphere::of_balls(&balls), grid.size);
-        let diamond_id = self.diamond_ids.fetch_add(1, Ordering::Relaxed);
+        let diamond_id = self.next_diamond_id();
         for ((t, (p, tight)), recut) in tets
             .iter()
             .zip(parts.iter().zip(tights))
@@ -691,6 +705,319 @@ impl Ctx<'_> {
     }
 }
 
+/// The counters a rank keeps while it simplifies, summed (or min/max-ed) on rank 0.
+#[derive(Default)]
+struct Counters {
+    degenerate: u64,
+    collapsed: u64,
+    collapsed_min_edge: f64,
+    duplicate: u64,
+    leaf_far2: f64,
+    repaired: u64,
+    textures: Option<TextureReport>,
+}
+
+impl Counters {
+    fn write(&self, w: &mut Wire) {
+        w.u64(self.degenerate);
+        w.u64(self.collapsed);
+        w.f64(self.collapsed_min_edge);
+        w.u64(self.duplicate);
+        w.f64(self.leaf_far2);
+        w.u64(self.repaired);
+        match &self.textures {
+            None => w.u8(0),
+            Some(t) => {
+                w.u8(1);
+                for v in texture_counts(t) {
+                    w.u64(v);
+                }
+                w.u64(t.unreadable_images.len() as u64);
+                for u in &t.unreadable_images {
+                    w.str(u);
+                }
+            }
+        }
+    }
+
+    fn read(r: &mut Unwire) -> Result<Counters, BuildError> {
+        let mut c = Counters {
+            degenerate: r.u64()?,
+            collapsed: r.u64()?,
+            collapsed_min_edge: r.f64()?,
+            duplicate: r.u64()?,
+            leaf_far2: r.f64()?,
+            repaired: r.u64()?,
+            textures: None,
+        };
+        if r.u8()? == 1 {
+            let mut v = [0u64; 10];
+            for x in v.iter_mut() {
+                *x = r.u64()?;
+            }
+            let mut t = TextureReport {
+                source_images: v[0],
+                source_texels: v[1],
+                crops: v[2],
+                atlases: v[3],
+                solid_only: v[4],
+                recut: v[5],
+                downsampled_to_fit: v[6],
+                texels: v[7],
+                leaf_texels: v[8],
+                bytes: v[9],
+                ..Default::default()
+            };
+            for _ in 0..r.u64()? {
+                t.unreadable_images.push(r.str()?);
+            }
+            c.textures = Some(t);
+        }
+        Ok(c)
+    }
+
+    /// Adds another rank's counters (texture decodes add up: each rank decodes the
+    /// images its own patches need).
+    fn add(&mut self, o: Counters) {
+        self.degenerate += o.degenerate;
+        self.collapsed += o.collapsed;
+        self.collapsed_min_edge = self.collapsed_min_edge.min(o.collapsed_min_edge);
+        self.duplicate += o.duplicate;
+        self.leaf_far2 = self.leaf_far2.max(o.leaf_far2);
+        self.repaired += o.repaired;
+        if let (Some(a), Some(b)) = (&mut self.textures, o.textures) {
+            let sum: Vec<u64> = texture_counts(a)
+                .iter()
+                .zip(texture_counts(&b))
+                .map(|(x, y)| x + y)
+                .collect();
+            a.source_images = sum[0];
+            a.source_texels = sum[1];
+            a.crops = sum[2];
+            a.atlases = sum[3];
+            a.solid_only = sum[4];
+            a.recut = sum[5];
+            a.downsampled_to_fit = sum[6];
+            a.texels = sum[7];
+            a.leaf_texels = sum[8];
+            a.bytes = sum[9];
+            a.unreadable_images.extend(b.unreadable_images);
+            a.unreadable_images.sort();
+            a.unreadable_images.dedup();
+        }
+    }
+}
+
+fn texture_counts(t: &TextureReport) -> [u64; 10] {
+    [
+        t.source_images,
+        t.source_texels,
+        t.crops,
+        t.atlases,
+        t.solid_only,
+        t.recut,
+        t.downsampled_to_fit,
+        t.texels,
+        t.leaf_texels,
+        t.bytes,
+    ]
+}
+
+impl NodeInfo {
+    /// The record and its patches' bytes (`work`, `recut`, `out`: read from this rank's
+    /// spools), for another rank.
+    fn write(&self, w: &mut Wire, blobs: [Option<&[u8]>; 3]) {
+        let (r, l, p) = self.id;
+        w.u8(r);
+        w.u8(l);
+        w.u64(p);
+        w.u8(self.leaf as u8);
+        for s in [&self.tight, &self.sat] {
+            for c in s.center {
+                w.f64(c);
+            }
+            w.f64(s.radius);
+        }
+        w.f64(self.error);
+        for c in self.cone {
+            w.f32(c);
+        }
+        w.u32(self.vertex_count);
+        w.u32(self.triangle_count);
+        w.u64(self.diamond);
+        for q in self.quant_min {
+            w.u32(q);
+        }
+        w.u16(self.texture_size[0]);
+        w.u16(self.texture_size[1]);
+        for b in blobs {
+            w.blob(b);
+        }
+    }
+
+    /// What [`NodeInfo::write`] wrote, its patches appended to this rank's spools.
+    fn read(r: &mut Unwire, work: &PatchSpool, out: &PatchSpool) -> Result<NodeInfo, BuildError> {
+        let id = (r.u8()?, r.u8()?, r.u64()?);
+        let leaf = r.u8()? != 0;
+        let mut sphere = || -> Result<Sphere, BuildError> {
+            Ok(Sphere {
+                center: [r.f64()?, r.f64()?, r.f64()?],
+                radius: r.f64()?,
+            })
+        };
+        let tight = sphere()?;
+        let sat = sphere()?;
+        let mut n = NodeInfo {
+            id,
+            leaf,
+            tight,
+            sat,
+            error: r.f64()?,
+            cone: [r.f32()?, r.f32()?, r.f32()?, r.f32()?],
+            vertex_count: r.u32()?,
+            triangle_count: r.u32()?,
+            diamond: r.u64()?,
+            quant_min: [r.u32()?, r.u32()?, r.u32()?],
+            texture_size: [r.u16()?, r.u16()?],
+            work: None,
+            recut: None,
+            out: None,
+        };
+        n.work = r.blob()?.map(|b| work.append(b)).transpose()?;
+        n.recut = r.blob()?.map(|b| work.append(b)).transpose()?;
+        n.out = r.blob()?.map(|b| out.append(b)).transpose()?;
+        Ok(n)
+    }
+}
+
+impl Ctx<'_> {
+    /// After a level: the messages for every rank. The children this rank's diamonds
+    /// just emitted go to rank 0 (which writes them), the diamonds' new nodes to the
+    /// rank of their parent's diamond; both leave this rank's node map.
+    fn outgoing(&self, mine: &[&Vec<Tet>], plan: &Plan) -> Result<Vec<Vec<u8>>, BuildError> {
+        let rank = self.rank as usize;
+        let mut out: Vec<Wire> = (0..self.ranks).map(|_| Wire::default()).collect();
+        let mut counts = vec![0u64; out.len()];
+        let mut nodes = self
+            .nodes
+            .lock()
+            .map_err(|_| self.internal_err("poisoned node map"))?;
+        let read = |sp: &Option<SpooledPatch>, spool: &PatchSpool| {
+            sp.as_ref().map(|sp| spool.read(sp)).transpose()
+        };
+        for d in mine {
+            for t in d.iter() {
+                if rank != 0 {
+                    for c in t.children() {
+                        if let Some(n) = nodes.remove(&tet_id(&c)) {
+                            let bytes = read(&n.out, &self.out)?;
+                            n.write(&mut out[0], [None, None, bytes.as_deref()]);
+                            counts[0] += 1;
+                        }
+                    }
+                }
+                let id = tet_id(t);
+                let to = plan.next_owner(id);
+                if to != rank {
+                    if let Some(n) = nodes.remove(&id) {
+                        let work = read(&n.work, &self.work)?;
+                        let recut = read(&n.recut, &self.work)?;
+                        n.write(&mut out[to], [work.as_deref(), recut.as_deref(), None]);
+                        counts[to] += 1;
+                    }
+                }
+            }
+        }
+        Ok(out
+            .into_iter()
+            .zip(counts)
+            .map(|(w, n)| {
+                let mut m = n.to_le_bytes().to_vec();
+                m.extend_from_slice(&w.bytes);
+                m
+            })
+            .collect())
+    }
+
+    /// The nodes other ranks sent this one after a level, into its node map and spools.
+    fn incoming(&self, got: &[Vec<u8>]) -> Result<(), BuildError> {
+        let mut nodes = self
+            .nodes
+            .lock()
+            .map_err(|_| self.internal_err("poisoned node map"))?;
+        for (from, m) in got.iter().enumerate() {
+            if from == self.rank as usize {
+                continue;
+            }
+            let mut r = Unwire::new(m, from);
+            for _ in 0..r.u64()? {
+                let n = NodeInfo::read(&mut r, &self.work, &self.out)?;
+                nodes.insert(n.id, n);
+            }
+        }
+        Ok(())
+    }
+
+    fn counters(&self) -> Counters {
+        Counters {
+            degenerate: self.degenerate.load(Ordering::Relaxed),
+            collapsed: self.collapsed.load(Ordering::Relaxed),
+            collapsed_min_edge: f64::from_bits(self.collapsed_min_edge.load(Ordering::Relaxed)),
+            duplicate: self.duplicate.load(Ordering::Relaxed),
+            leaf_far2: f64::from_bits(self.leaf_far2.load(Ordering::Relaxed)),
+            repaired: self.repaired.load(Ordering::Relaxed),
+            textures: self.baker.as_ref().map(Baker::report),
+        }
+    }
+
+    /// Rank 0: every rank's counters (its own included, sent to itself) into this
+    /// context's, and every rank's figures.
+    fn absorb_counters(&self, got: &[Vec<u8>]) -> Result<Vec<RankStats>, BuildError> {
+        let mut all = Counters {
+            collapsed_min_edge: f64::INFINITY,
+            textures: self.baker.as_ref().map(|_| TextureReport::default()),
+            ..Default::default()
+        };
+        let mut ranks = Vec::new();
+        for (from, m) in got.iter().enumerate() {
+            let mut r = Unwire::new(m, from);
+            all.add(Counters::read(&mut r)?);
+            ranks.push(RankStats::read(&mut r)?);
+        }
+        self.degenerate.store(all.degenerate, Ordering::Relaxed);
+        self.collapsed.store(all.collapsed, Ordering::Relaxed);
+        self.collapsed_min_edge
+            .store(all.collapsed_min_edge.to_bits(), Ordering::Relaxed);
+        self.duplicate.store(all.duplicate, Ordering::Relaxed);
+        self.leaf_far2
+            .store(all.leaf_far2.to_bits(), Ordering::Relaxed);
+        self.repaired.store(all.repaired, Ordering::Relaxed);
+        *self
+            .all_textures
+            .lock()
+            .map_err(|_| self.internal_err("poisoned texture report"))? = all.textures;
+        Ok(ranks)
+    }
+
+    /// The counters into the report (before [`finalize`], which reads some of them).
+    fn report_into(&self, report: &mut BuildReport) -> Result<(), BuildError> {
+        let c = self.counters();
+        report.degenerate_triangles_removed = c.degenerate;
+        report.triangles_collapsed_by_grid = c.collapsed;
+        report.quant_bits_to_keep_all = (c.collapsed > 0)
+            .then(|| crate::partition::bits_for_edge(self.part.grid.size, c.collapsed_min_edge));
+        report.duplicate_triangles_removed = c.duplicate;
+        report.simplifier_repairs = c.repaired;
+        let merged = self
+            .all_textures
+            .lock()
+            .map_err(|_| self.internal_err("poisoned texture report"))?
+            .take();
+        report.textures = merged.or(c.textures);
+        Ok(())
+    }
+}
+
 fn quant_min(v: &[WorkVertex]) -> [u32; 3] {
     if v.is_empty() {
         return [0; 3];
@@ -698,6 +1025,7 @@ fn quant_min(v: &[WorkVertex]) -> [u32; 3] {
     std::array::from_fn(|a| v.iter().map(|x| x.q[a]).min().unwrap_or(0))
 }
 
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn build_hierarchy(
     imp: &Imported,
     part: &Partition,
@@ -706,7 +1034,152 @@ pub(crate) fn build_hierarchy(
     opts: &BuildOptions,
     progress: &dyn Progress,
     report: &mut BuildReport,
+    peers: &dyn Peers,
 ) -> Result<(), BuildError> {
+    let cancelled = || progress.cancelled();
+    let made = new_ctx(imp, part, tmp, opts, peers);
+    let (ctx, mut by_level) = distribute::agree(peers, made, &cancelled)?;
+    // Every level's diamonds in a deterministic order (results do not depend on it,
+    // ids do), known to every rank, so that each can tell who owns what.
+    let levels: Vec<Vec<Vec<Tet>>> = by_level
+        .iter_mut()
+        .map(|m| {
+            let mut diamonds: Vec<Vec<Tet>> = std::mem::take(m).into_values().collect();
+            for d in diamonds.iter_mut() {
+                d.sort_by_key(|t| (t.root, t.path));
+            }
+            diamonds.sort_by_key(|d| (d[0].root, d[0].path));
+            diamonds
+        })
+        .collect();
+    drop(by_level);
+    let plan = Plan::new(&levels, peers.size());
+    let rank = peers.rank();
+    let mut stats = RankStats {
+        rank: rank as u32,
+        stage_seconds: report.stage_seconds.clone(),
+        ..Default::default()
+    };
+    let total_diamonds: usize = levels.iter().map(Vec::len).sum();
+    progress.stage("simplify diamonds", total_diamonds as u64);
+    // An error of this rank is carried to the next exchange point, so that no rank
+    // waits for one that gave up.
+    let mut pending: Result<(), BuildError> = Ok(());
+    for level in (0..levels.len()).rev() {
+        let mine: Vec<&Vec<Tet>> = levels[level]
+            .iter()
+            .filter(|d| plan.owner(tet_id(&d[0])) == rank)
+            .collect();
+        let t = std::time::Instant::now();
+        pending = pending.and_then(|()| {
+            mine.par_iter().try_for_each(|d| {
+                if progress.cancelled() {
+                    return Err(BuildError::Interrupted);
+                }
+                let r = ctx.process_diamond(d);
+                progress.advance(1);
+                r
+            })
+        });
+        // The other ranks' diamonds count as done (their progress is theirs to show).
+        progress.advance((levels[level].len() - mine.len()) as u64);
+        ctx.release();
+        let work_seconds = t.elapsed().as_secs_f64();
+        let t = std::time::Instant::now();
+        let mut level_stats = LevelStats {
+            level: level as u32,
+            diamonds: mine.len() as u64,
+            work_seconds,
+            ..Default::default()
+        };
+        if peers.size() > 1 {
+            let out = pending.and_then(|()| ctx.outgoing(&mine, &plan));
+            level_stats.bytes_sent = sent_bytes(&out, rank);
+            let got = distribute::settle(peers, out, &cancelled)?;
+            level_stats.bytes_received = received_bytes(&got, rank);
+            pending = ctx.incoming(&got);
+        }
+        level_stats.exchange_seconds = t.elapsed().as_secs_f64();
+        tracing::info!(
+            level,
+            diamonds = mine.len(),
+            seconds = work_seconds,
+            exchange_seconds = level_stats.exchange_seconds,
+            "diamond level done"
+        );
+        stats.levels.push(level_stats);
+    }
+    progress.finish_stage();
+    ctx.phases.log();
+    // Roots: encode (no morph targets); unsplit roots are leaves, loaded here. Rank 0
+    // (which received every root) does it.
+    if rank == 0 {
+        pending = pending.and_then(|()| {
+            for r in 0..6u8 {
+                let id = (r, 0u8, 0u64);
+                if let Some(p) = ctx.load_child(id)? {
+                    ctx.emit(id, &p, Vec::new(), false)?;
+                }
+            }
+            Ok(())
+        });
+    }
+    if peers.size() > 1 {
+        // The counters and every rank's figures, to rank 0.
+        stats.peak_rss_bytes = crate::peak_rss_bytes().unwrap_or(0);
+        let out = pending.map(|()| {
+            let mut w = Wire::default();
+            ctx.counters().write(&mut w);
+            stats.write(&mut w);
+            let mut out = vec![Vec::new(); peers.size()];
+            out[0] = w.bytes;
+            out
+        });
+        let got = distribute::settle(peers, out, &cancelled)?;
+        if rank != 0 {
+            // Rank 0 writes; the others learn how that went and return the same.
+            return distribute::agree(peers, Ok(()), &cancelled);
+        }
+        let written = ctx
+            .absorb_counters(&got)
+            .map(|ranks| report.ranks = ranks)
+            .and_then(|()| ctx.report_into(report))
+            .and_then(|()| finalize(&ctx, output, opts, progress, report));
+        return distribute::agree(peers, written, &cancelled);
+    }
+    pending?;
+    ctx.report_into(report)?;
+    finalize(&ctx, output, opts, progress, report)
+}
+
+fn sent_bytes(out: &Result<Vec<Vec<u8>>, BuildError>, rank: usize) -> u64 {
+    out.as_ref().map_or(0, |o| {
+        o.iter()
+            .enumerate()
+            .filter(|&(r, _)| r != rank)
+            .map(|(_, m)| m.len() as u64)
+            .sum()
+    })
+}
+
+fn received_bytes(got: &[Vec<u8>], rank: usize) -> u64 {
+    got.iter()
+        .enumerate()
+        .filter(|&(r, _)| r != rank)
+        .map(|(_, m)| m.len() as u64)
+        .sum()
+}
+
+/// The build's context and its internal tetrahedra by level and diamond.
+type Levels = Vec<FxHashMap<DiamondKey, Vec<Tet>>>;
+
+fn new_ctx<'a>(
+    imp: &'a Imported,
+    part: &'a Partition,
+    tmp: &Path,
+    opts: &BuildOptions,
+    peers: &dyn Peers,
+) -> Result<(Ctx<'a>, Levels), BuildError> {
     // Internal nodes: split tetrahedra with at least one triangle below them.
     let mut internal: HashSet<TetId> = HashSet::new();
     for l in &part.leaves {
@@ -718,7 +1191,7 @@ pub(crate) fn build_hierarchy(
             id = parent_id(p);
         }
     }
-    let mut by_level: Vec<FxHashMap<DiamondKey, Vec<Tet>>> = Vec::new();
+    let mut by_level: Levels = Vec::new();
     for &(r, l, p) in &internal {
         let t = Tet::from_path(r, l, p)
             .ok_or_else(|| BuildError::Internal("bad tetrahedron".into()))?;
@@ -745,7 +1218,9 @@ pub(crate) fn build_hierarchy(
         work: PatchSpool::new(tmp)?,
         out: PatchSpool::new(tmp)?,
         nodes: Mutex::new(FxHashMap::default()),
-        diamond_ids: AtomicU32::new(0),
+        diamond_ids: AtomicU64::new(0),
+        rank: peers.rank() as u64,
+        ranks: peers.size() as u64,
         degenerate: AtomicU64::new(0),
         collapsed: AtomicU64::new(0),
         collapsed_min_edge: AtomicU64::new(f64::INFINITY.to_bits()),
@@ -775,52 +1250,9 @@ pub(crate) fn build_hierarchy(
             )
             .spool_in(tmp)
         }),
+        all_textures: Mutex::new(None),
     };
-    let total_diamonds: usize = by_level.iter().map(|m| m.len()).sum();
-    progress.stage("simplify diamonds", total_diamonds as u64);
-    for level in (0..by_level.len()).rev() {
-        let mut diamonds: Vec<Vec<Tet>> =
-            std::mem::take(&mut by_level[level]).into_values().collect();
-        for d in diamonds.iter_mut() {
-            d.sort_by_key(|t| (t.root, t.path));
-        }
-        // Deterministic order of work (results do not depend on it, ids do).
-        diamonds.sort_by_key(|d| (d[0].root, d[0].path));
-        let t = std::time::Instant::now();
-        diamonds.par_iter().try_for_each(|d| {
-            if progress.cancelled() {
-                return Err(BuildError::Interrupted);
-            }
-            let r = ctx.process_diamond(d);
-            progress.advance(1);
-            r
-        })?;
-        ctx.release();
-        tracing::info!(
-            level,
-            diamonds = diamonds.len(),
-            seconds = t.elapsed().as_secs_f64(),
-            "diamond level done"
-        );
-    }
-    progress.finish_stage();
-    ctx.phases.log();
-    // Roots: encode (no morph targets); unsplit roots are leaves, loaded here.
-    for r in 0..6u8 {
-        let id = (r, 0u8, 0u64);
-        if let Some(p) = ctx.load_child(id)? {
-            ctx.emit(id, &p, Vec::new(), false)?;
-        }
-    }
-    report.degenerate_triangles_removed = ctx.degenerate.load(Ordering::Relaxed);
-    report.triangles_collapsed_by_grid = ctx.collapsed.load(Ordering::Relaxed);
-    let shortest = f64::from_bits(ctx.collapsed_min_edge.load(Ordering::Relaxed));
-    report.quant_bits_to_keep_all = (report.triangles_collapsed_by_grid > 0)
-        .then(|| crate::partition::bits_for_edge(part.grid.size, shortest));
-    report.duplicate_triangles_removed = ctx.duplicate.load(Ordering::Relaxed);
-    report.simplifier_repairs = ctx.repaired.load(Ordering::Relaxed);
-    report.textures = ctx.baker.as_ref().map(Baker::report);
-    finalize(&ctx, output, opts, progress, report)
+    Ok((ctx, by_level))
 }
 
 fn finalize(
@@ -844,9 +1276,9 @@ fn finalize(
     infos.sort_by_key(|(m, n)| (n.id.1, *m, n.id.0, n.id.2));
     // Diamond ids were handed out in completion order, which varies between runs:
     // renumber them in table order so that a build is reproducible byte for byte.
-    let mut diamond_ids: FxHashMap<u32, u32> = FxHashMap::default();
+    let mut diamond_ids: FxHashMap<u64, u64> = FxHashMap::default();
     for (_, n) in infos.iter_mut() {
-        let next = diamond_ids.len() as u32;
+        let next = diamond_ids.len() as u64;
         n.diamond = *diamond_ids.entry(n.diamond).or_insert(next);
     }
     let index: FxHashMap<TetId, u32> = infos
@@ -877,7 +1309,8 @@ fn finalize(
             parent: parent_id(n.id)
                 .and_then(|pid| index.get(&pid).copied())
                 .unwrap_or(NO_NODE),
-            diamond: n.diamond,
+            diamond: u32::try_from(n.diamond)
+                .map_err(|_| ctx.internal_err("more than 2^32 diamonds"))?,
             level: l,
             root: r,
             flags: if n.leaf { NODE_FLAG_LEAF } else { 0 },

@@ -20,10 +20,14 @@
 
 pub mod bounds;
 pub mod diamond;
+mod distribute;
 mod hierarchy;
 pub mod import;
+#[cfg(feature = "mpi")]
+pub mod mpi_peers;
 pub mod partition;
 pub mod patch;
+pub mod peers;
 pub mod recut;
 pub mod texture;
 mod timing;
@@ -33,6 +37,8 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 use tessera_format::FormatError;
 use tessera_mesh::{ImportReport, MeshError};
+
+pub use distribute::{LevelStats, RankStats};
 
 /// Finest quantisation grid: `2^21` cells along the cube's edge (grid coordinates stay
 /// below `2^22`, which the exact integer predicates of the builder need).
@@ -157,6 +163,10 @@ pub enum BuildError {
     Internal(String),
     #[error("interrupted")]
     Interrupted,
+    /// Another rank of a distributed build failed; `message` is its error's text (what
+    /// a single process would have said).
+    #[error("{message}")]
+    Peer { rank: usize, message: String },
 }
 
 impl BuildError {
@@ -262,6 +272,9 @@ pub struct BuildReport {
     /// (stage, seconds).
     pub stage_seconds: Vec<(String, f64)>,
     pub seconds: f64,
+    /// A distributed build ([`build_distributed`] with more than one rank): what each
+    /// rank did, on rank 0 (empty elsewhere and for a single process).
+    pub ranks: Vec<RankStats>,
 }
 
 impl BuildReport {
@@ -308,6 +321,22 @@ pub fn build(
     opts: &BuildOptions,
     progress: &dyn Progress,
 ) -> Result<BuildReport, BuildError> {
+    build_distributed(input, output, opts, progress, &peers::Solo)
+}
+
+/// [`build`] by the ranks of `peers` together, each calling this with the same
+/// arguments (a file system they share for `input` and `output`): each imports and
+/// partitions the whole input, simplifies its share of every level's diamonds and
+/// exchanges the patches (see docs/mpi.md); rank 0 writes `output`, byte for byte the
+/// model [`build`] writes. Every rank returns the same outcome: on any rank's failure,
+/// each returns it (the text a single process would print) and nothing is written.
+pub fn build_distributed(
+    input: &Path,
+    output: &Path,
+    opts: &BuildOptions,
+    progress: &dyn Progress,
+    peers: &dyn peers::Peers,
+) -> Result<BuildReport, BuildError> {
     if let Some(bits) = opts.quant_bits {
         if !(1..=MAX_QUANT_BITS).contains(&bits) {
             return Err(BuildError::Options(format!(
@@ -337,7 +366,7 @@ pub fn build(
         }
         b.build().map_err(|e| BuildError::Internal(e.to_string()))?
     };
-    pool.install(|| build_in_pool(input, output, opts, progress))
+    pool.install(|| build_in_pool(input, output, opts, progress, peers))
 }
 
 /// Removes what builds killed before they could clean up (SIGKILL, a second Ctrl-C, a
@@ -396,8 +425,47 @@ fn build_in_pool(
     output: &Path,
     opts: &BuildOptions,
     progress: &dyn Progress,
+    peers: &dyn peers::Peers,
 ) -> Result<BuildReport, BuildError> {
     let started = Instant::now();
+    let mut report = BuildReport::default();
+    // Import and partition on every rank; they all learn whether each one succeeded
+    // before the hierarchy's exchanges begin.
+    let prepared = prepare(input, output, opts, progress, &mut report);
+    let (tmp, imported, part) = distribute::agree(peers, prepared, &|| progress.cancelled())?;
+    let t = Instant::now();
+    hierarchy::build_hierarchy(
+        &imported,
+        &part,
+        tmp.path(),
+        output,
+        opts,
+        progress,
+        &mut report,
+        peers,
+    )?;
+    report
+        .stage_seconds
+        .push(("hierarchy+write".to_string(), t.elapsed().as_secs_f64()));
+    tracing::info!(
+        stage = "hierarchy+write",
+        seconds = t.elapsed().as_secs_f64(),
+        peak_rss_mib = peak_rss_mib(),
+        "stage done"
+    );
+    report.seconds = started.elapsed().as_secs_f64();
+    Ok(report)
+}
+
+/// The stages before the hierarchy: the temporary directory, import, normals and
+/// partition.
+fn prepare(
+    input: &Path,
+    output: &Path,
+    opts: &BuildOptions,
+    progress: &dyn Progress,
+    report: &mut BuildReport,
+) -> Result<(tempfile::TempDir, import::Imported, partition::Partition), BuildError> {
     let tmp_parent = match &opts.tmp_dir {
         Some(d) => d.clone(),
         None => output
@@ -413,7 +481,6 @@ fn build_in_pool(
         .prefix(&format!(".tessera-build-{}-", std::process::id()))
         .tempdir_in(&tmp_parent)
         .map_err(|e| BuildError::io(&tmp_parent, e))?;
-    let mut report = BuildReport::default();
     let mut t = Instant::now();
     let mut lap = |name: &str, report: &mut BuildReport| {
         report
@@ -471,7 +538,7 @@ fn build_in_pool(
     report.input_triangles = imported.face_count;
     report.import = imported.report.clone();
     report.normals_computed = imported.normals_computed;
-    lap("import", &mut report);
+    lap("import", report);
     // Normals (when the input has none) are computed as a task of the worker pool beside
     // the partition (`rayon::join`, so `--threads` still bounds the threads): the
     // partition reads only positions, and the normals are first needed by the hierarchy.
@@ -497,17 +564,6 @@ fn build_in_pool(
     }
     check()?;
     report.oversized_leaves = part.oversized_leaves;
-    lap("partition", &mut report);
-    hierarchy::build_hierarchy(
-        &imported,
-        &part,
-        tmp.path(),
-        output,
-        opts,
-        progress,
-        &mut report,
-    )?;
-    lap("hierarchy+write", &mut report);
-    report.seconds = started.elapsed().as_secs_f64();
-    Ok(report)
+    lap("partition", report);
+    Ok((tmp, imported, part))
 }

@@ -75,6 +75,12 @@ pub struct Args {
     /// JPEG quality of patch textures (1..=100).
     #[arg(long, default_value_t = 90, value_parser = clap::value_parser!(u8).range(1..=100))]
     texture_quality: u8,
+    /// Build with the ranks of an MPI job: `mpirun -n N tessera build --mpi ...`, every
+    /// rank with the same arguments and the input and output on a file system they
+    /// share; rank 0 writes the model (byte for byte the single process's) and prints
+    /// the report. Needs a tessera built with `--features mpi` (docs/mpi.md).
+    #[arg(long)]
+    mpi: bool,
     /// Print the report as JSON on stdout.
     #[arg(long)]
     json: bool,
@@ -114,10 +120,18 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         asset_root: a.asset_root,
         max_input_triangles: a.max_input_triangles,
     };
-    let bars = Bars::new(a.quiet || a.json);
     crate::progress::install_interrupt_handler();
-    let r = build(&a.input, &a.output, &opts, &bars)
-        .with_context(|| format!("building {}", a.output.display()))?;
+    let r = if a.mpi {
+        match build_mpi(&a.input, &a.output, &opts, a.quiet || a.json)? {
+            Some(r) => r,
+            // Not rank 0: rank 0 reports.
+            None => return Ok(ExitCode::SUCCESS),
+        }
+    } else {
+        let bars = Bars::new(a.quiet || a.json);
+        build(&a.input, &a.output, &opts, &bars)
+            .with_context(|| format!("building {}", a.output.display()))?
+    };
     if a.json {
         println!("{}", serde_json::to_string_pretty(&report_json(&r))?);
     } else {
@@ -128,6 +142,63 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         eprintln!("warning: texture image {line}: its faces are drawn in their material's colour");
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// `--mpi`: this process's part of the job. Rank 0 gets the report; the other ranks
+/// `None`, or on failure a quiet exit (rank 0 prints the error, once).
+#[cfg(feature = "mpi")]
+fn build_mpi(
+    input: &std::path::Path,
+    output: &std::path::Path,
+    opts: &BuildOptions,
+    quiet: bool,
+) -> anyhow::Result<Option<BuildReport>> {
+    use tessera_build::peers::Peers;
+    crate::progress::install_patient_interrupt_handler();
+    let peers =
+        tessera_build::mpi_peers::MpiPeers::init().map_err(|e| anyhow::anyhow!("--mpi: {e}"))?;
+    let rank = peers.rank();
+    let bars = Bars::new(quiet || rank != 0);
+    let r = tessera_build::build_distributed(input, output, opts, &bars, &peers);
+    match r {
+        Ok(r) => Ok((rank == 0).then_some(r)),
+        Err(e) => {
+            let interrupted = matches!(e, tessera_build::BuildError::Interrupted);
+            if interrupted {
+                // A rank died or the job was signalled: MPI_Finalize could wait for
+                // ranks that are gone.
+                peers.abandon();
+            } else {
+                drop(peers);
+            }
+            if rank != 0 && !interrupted {
+                // Every rank has this error; rank 0 prints it.
+                std::process::exit(1);
+            }
+            let e = anyhow::Error::new(e).context(format!("building {}", output.display()));
+            Err(if interrupted {
+                e.context(format!(
+                    "rank {rank}: the MPI job stopped (another rank died or the job was signalled; \
+                     mpirun names the rank); nothing was written"
+                ))
+            } else {
+                e
+            })
+        }
+    }
+}
+
+#[cfg(not(feature = "mpi"))]
+fn build_mpi(
+    _: &std::path::Path,
+    _: &std::path::Path,
+    _: &BuildOptions,
+    _: bool,
+) -> anyhow::Result<Option<BuildReport>> {
+    anyhow::bail!(
+        "--mpi: this tessera was built without MPI; build it with \
+         `cargo build --release -p tessera-cli --features mpi` (needs Open MPI: scripts/setup)"
+    )
 }
 
 pub fn report_json(r: &BuildReport) -> serde_json::Value {
@@ -161,6 +232,19 @@ pub fn report_json(r: &BuildReport) -> serde_json::Value {
             "unreadable_images": t.unreadable_images,
         })),
         "stages": r.stage_seconds.iter().map(|(n, s)| json!({"stage": n, "seconds": s})).collect::<Vec<_>>(),
+        "ranks": r.ranks.iter().map(|k| json!({
+            "rank": k.rank,
+            "peak_rss_bytes": k.peak_rss_bytes,
+            "stages": k.stage_seconds.iter().map(|(n, s)| json!({"stage": n, "seconds": s})).collect::<Vec<_>>(),
+            "levels": k.levels.iter().map(|l| json!({
+                "level": l.level,
+                "diamonds": l.diamonds,
+                "work_seconds": l.work_seconds,
+                "exchange_seconds": l.exchange_seconds,
+                "bytes_sent": l.bytes_sent,
+                "bytes_received": l.bytes_received,
+            })).collect::<Vec<_>>(),
+        })).collect::<Vec<_>>(),
         "warnings": {
             "degenerate_triangles_removed": r.degenerate_triangles_removed,
             "triangles_collapsed_by_grid": r.triangles_collapsed_by_grid,
@@ -233,6 +317,18 @@ fn print_report(out: &std::path::Path, r: &BuildReport) {
     }
     for (n, s) in &r.stage_seconds {
         println!("    {n:<16} {s:.2} s");
+    }
+    for k in &r.ranks {
+        let sum = |f: fn(&tessera_build::LevelStats) -> f64| k.levels.iter().map(f).sum::<f64>();
+        println!(
+            "  rank {:<7} {} diamonds, {:.2} s simplifying, {:.2} s exchanging, {} bytes sent, peak RSS {:.1} MiB",
+            k.rank,
+            sum(|l| l.diamonds as f64),
+            sum(|l| l.work_seconds),
+            sum(|l| l.exchange_seconds),
+            sum(|l| l.bytes_sent as f64),
+            k.peak_rss_bytes as f64 / (1 << 20) as f64
+        );
     }
     let w = r.degenerate_triangles_removed
         + r.duplicate_triangles_removed

@@ -17,8 +17,26 @@ extern "C" fn on_signal(_: libc::c_int) {
     }
 }
 
+/// Under mpirun: every signal only asks for the stop. mpirun, stopping a job, sends
+/// SIGINT, SIGTERM and after `odls_base_sigkill_timeout` (1 s) SIGKILL; exiting at the
+/// second signal would leave the temporary files the first one was removing.
+extern "C" fn on_signal_patient(_: libc::c_int) {
+    INTERRUPTED.store(true, Ordering::SeqCst);
+}
+
 /// Route SIGINT and SIGTERM to a graceful stop (the first one) of long commands.
 pub fn install_interrupt_handler() {
+    install(on_signal);
+}
+
+/// [`install_interrupt_handler`] for a rank of an MPI job: repeated signals do not
+/// exit at once (mpirun escalates to SIGKILL itself).
+#[cfg_attr(not(feature = "mpi"), allow(dead_code))]
+pub fn install_patient_interrupt_handler() {
+    install(on_signal_patient);
+}
+
+fn install(on_signal: extern "C" fn(libc::c_int)) {
     let handler = on_signal as extern "C" fn(libc::c_int) as libc::sighandler_t;
     // SAFETY: the handler only touches an atomic and calls `_exit`.
     unsafe {
