@@ -70,16 +70,7 @@ pub fn decode_all(m: &Model) -> Vec<PatchData> {
 
 /// Merges the patches of `nodes` (from pre-decoded `patches`) into one mesh.
 pub fn merge(patches: &[PatchData], nodes: &[u32]) -> CutMesh {
-    merge_patches(nodes.iter().map(|&i| {
-        let p = &patches[i as usize];
-        PatchRef {
-            positions: &p.positions,
-            normals: &p.normals,
-            colors: &p.colors,
-            uvs: &p.uvs,
-            indices: &p.indices,
-        }
-    }))
+    merge_patches(nodes.iter().map(|&i| PatchRef::from(&patches[i as usize])))
 }
 
 /// Edge report of the merged cut.

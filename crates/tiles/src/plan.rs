@@ -1,0 +1,291 @@
+//! The diamond hierarchy as a 3D Tiles tree (`docs/tiles.md` has the argument).
+//!
+//! One tile per node with a parent, one root tile for all the roots. A tile's content is
+//! its node's patch, its `geometricError` the node's saturated error and its bounding
+//! sphere the node's saturated sphere; `refine` is `REPLACE` (inherited from the root).
+//! A 3D Tiles client refines a tile when `geometricError * height_px / (2 d tan(fov/2))`
+//! exceeds its maximum screen-space error, `d` the distance from the eye to the bounding
+//! volume: Tessera's own test (`tessera_select::needs_refinement`) with the tolerance
+//! renamed. Mates of a diamond carry bit-identical errors and spheres, so they decide
+//! alike whatever client rounds how; saturated errors never grow toward the leaves and
+//! saturated spheres are nested, so no tile refines unless its parent did. Together:
+//! every cut a client picks is a top-down saturated cut, which the builder makes
+//! crack-free.
+//!
+//! The roots: the six root tetrahedra share the cube's diagonal as their refinement
+//! edge, so the builder gives them one diamond (one error, one sphere); the root tile
+//! draws them together and refines them together. Should a model's roots differ, the
+//! root tile takes the largest root error and the sphere around all root spheres, which
+//! keeps both properties (one decision for all roots; no child above its parent).
+
+use tessera_format::{Header, NodeRecord, NO_NODE};
+
+/// One tile of the tree.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Tile {
+    /// The nodes whose patches are the tile's content (the roots for the root tile,
+    /// else one node).
+    pub nodes: Vec<u32>,
+    /// `geometricError`: the saturated error of the nodes (model units).
+    pub error: f64,
+    /// `boundingVolume.sphere`: the saturated sphere, model coordinates (centre xyz,
+    /// radius).
+    pub sphere: [f64; 4],
+    /// Indices of the child tiles in [`TileTree::tiles`].
+    pub children: Vec<usize>,
+    /// Triangles of the content (0: the tile has no content).
+    pub triangles: u64,
+}
+
+/// The tree of a model's tiles; tile 0 is the root.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TileTree {
+    pub tiles: Vec<Tile>,
+}
+
+/// Why a node table cannot become a tile tree.
+#[derive(Debug, thiserror::Error)]
+pub enum PlanError {
+    #[error("the model has no nodes")]
+    Empty,
+    #[error("node {node}: {detail}")]
+    Node { node: u32, detail: String },
+}
+
+/// A saturated sphere (relative to the cube origin, f32) in model coordinates.
+pub fn model_sphere(h: &Header, s: [f32; 4]) -> [f64; 4] {
+    [
+        h.cube_origin[0] + f64::from(s[0]),
+        h.cube_origin[1] + f64::from(s[1]),
+        h.cube_origin[2] + f64::from(s[2]),
+        f64::from(s[3]),
+    ]
+}
+
+/// The smallest sphere around `a` holding `b` too (exact for equal spheres).
+fn sphere_around(a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
+    let d = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+    let dist = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+    if dist + b[3] <= a[3] {
+        return a;
+    }
+    if dist + a[3] <= b[3] {
+        return b;
+    }
+    let r = (dist + a[3] + b[3]) / 2.0;
+    let t = (r - a[3]) / dist;
+    [a[0] + d[0] * t, a[1] + d[1] * t, a[2] + d[2] * t, r]
+}
+
+impl TileTree {
+    /// The tree of a node table (`header.root_count` roots first, children after their
+    /// parents, as `tessera-format` checks when it reads a model).
+    pub fn plan(h: &Header, nodes: &[NodeRecord]) -> Result<TileTree, PlanError> {
+        let roots = (h.root_count as usize).min(nodes.len());
+        if roots == 0 {
+            return Err(PlanError::Empty);
+        }
+        let first = &nodes[0];
+        let mut root = Tile {
+            nodes: (0..roots as u32).collect(),
+            error: f64::from(first.error),
+            sphere: model_sphere(h, first.saturated_sphere),
+            children: Vec::new(),
+            triangles: 0,
+        };
+        for n in &nodes[..roots] {
+            root.error = root.error.max(f64::from(n.error));
+            root.sphere = sphere_around(root.sphere, model_sphere(h, n.saturated_sphere));
+            root.triangles += u64::from(n.triangle_count);
+        }
+        let mut tiles = vec![root];
+        // (tile index, node) pairs still to expand; the root tile's children are every
+        // root's children.
+        let mut stack: Vec<(usize, u32)> = (0..roots as u32).rev().map(|r| (0, r)).collect();
+        while let Some((tile, node)) = stack.pop() {
+            let n = &nodes[node as usize];
+            for &c in &n.children {
+                if c == NO_NODE {
+                    continue;
+                }
+                if c as usize >= nodes.len() || c <= node {
+                    return Err(PlanError::Node {
+                        node,
+                        detail: format!("child {c} is out of order or out of range"),
+                    });
+                }
+                let cn = &nodes[c as usize];
+                let t = tiles.len();
+                tiles.push(Tile {
+                    nodes: vec![c],
+                    error: f64::from(cn.error),
+                    sphere: model_sphere(h, cn.saturated_sphere),
+                    children: Vec::new(),
+                    triangles: u64::from(cn.triangle_count),
+                });
+                tiles[tile].children.push(t);
+                stack.push((t, c));
+            }
+        }
+        Ok(TileTree { tiles })
+    }
+
+    /// The content URI of tile `t` (relative to `tileset.json`), if it has content.
+    pub fn content_uri(&self, t: usize) -> Option<String> {
+        let tile = &self.tiles[t];
+        (tile.triangles > 0).then(|| {
+            if t == 0 {
+                "tiles/root.glb".to_string()
+            } else {
+                format!("tiles/{}.glb", tile.nodes[0])
+            }
+        })
+    }
+
+    /// The `tileset.json` document: 3D Tiles 1.1, `REPLACE`, spheres and errors as
+    /// [`Tile`] says, in tileset coordinates (model coordinates minus `origin`), with
+    /// `root_transform` (column-major 4x4, tileset to world) on the root. Each tile's
+    /// `extras.tessera_nodes` lists the nodes of its content.
+    pub fn tileset_json(
+        &self,
+        origin: [f64; 3],
+        root_transform: [f64; 16],
+        generator: &str,
+    ) -> serde_json::Value {
+        use serde_json::{json, Map, Value};
+        // Built bottom-up (children have larger indices than their parent), so deep
+        // trees need no recursion.
+        let mut built: Vec<Option<Value>> = vec![None; self.tiles.len()];
+        for t in (0..self.tiles.len()).rev() {
+            let tile = &self.tiles[t];
+            let s = tile.sphere;
+            let mut o = Map::new();
+            o.insert(
+                "boundingVolume".into(),
+                json!({ "sphere": [s[0] - origin[0], s[1] - origin[1], s[2] - origin[2], s[3]] }),
+            );
+            o.insert("geometricError".into(), json!(tile.error));
+            if t == 0 {
+                o.insert("refine".into(), json!("REPLACE"));
+                o.insert("transform".into(), json!(root_transform.to_vec()));
+            }
+            if let Some(uri) = self.content_uri(t) {
+                o.insert("content".into(), json!({ "uri": uri }));
+            }
+            if !tile.children.is_empty() {
+                let children: Vec<Value> = tile
+                    .children
+                    .iter()
+                    .map(|&c| built[c].take().expect("a child is built before its parent"))
+                    .collect();
+                o.insert("children".into(), Value::Array(children));
+            }
+            o.insert("extras".into(), json!({ "tessera_nodes": tile.nodes }));
+            built[t] = Some(Value::Object(o));
+        }
+        let root = built[0].take().expect("the root tile");
+        json!({
+            "asset": { "version": "1.1", "generator": generator },
+            "geometricError": self.tiles[0].error,
+            "root": root,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A node record with the fields the plan reads.
+    fn node(children: [u32; 2], error: f32, sphere: [f32; 4], tris: u32) -> NodeRecord {
+        NodeRecord {
+            children,
+            error,
+            saturated_sphere: sphere,
+            tight_sphere: sphere,
+            triangle_count: tris,
+            parent: NO_NODE,
+            ..NodeRecord::default()
+        }
+    }
+
+    fn header(roots: u32) -> Header {
+        let mut h: Header = bytemuck::Zeroable::zeroed();
+        h.root_count = roots;
+        h.cube_origin = [10.0, 20.0, 30.0];
+        h
+    }
+
+    #[test]
+    fn roots_share_a_tile_and_children_follow_their_nodes() {
+        // Why: the root tile must carry every root (they refine as one diamond) and every
+        // other node must appear once, under its parent's tile, with its own error and
+        // sphere moved into model coordinates.
+        const N: u32 = NO_NODE;
+        let s = |x: f32, r: f32| [x, 0.0, 0.0, r];
+        let nodes = vec![
+            node([2, 3], 4.0, s(4.0, 5.0), 100),
+            node([4, N], 4.0, s(4.0, 5.0), 50),
+            node([N, N], 0.0, s(2.0, 2.0), 10),
+            node([N, N], 0.0, s(6.0, 2.0), 0),
+            node([N, N], 0.0, s(5.0, 1.0), 20),
+        ];
+        let t = TileTree::plan(&header(2), &nodes).unwrap();
+        assert_eq!(t.tiles.len(), 4);
+        assert_eq!(t.tiles[0].nodes, [0, 1]);
+        assert_eq!(t.tiles[0].error, 4.0);
+        assert_eq!(t.tiles[0].sphere, [14.0, 20.0, 30.0, 5.0]);
+        assert_eq!(t.tiles[0].triangles, 150);
+        let kids: Vec<u32> = t.tiles[0]
+            .children
+            .iter()
+            .map(|&c| t.tiles[c].nodes[0])
+            .collect();
+        assert_eq!(kids, [2, 3, 4]);
+        assert_eq!(t.content_uri(0).as_deref(), Some("tiles/root.glb"));
+        // Node 3 holds no triangles: a tile without content.
+        let empty = t.tiles.iter().position(|x| x.nodes == [3]).unwrap();
+        assert_eq!(t.content_uri(empty), None);
+        let j = t.tileset_json([14.0, 20.0, 30.0], IDENTITY, "test");
+        assert_eq!(j["asset"]["version"], "1.1");
+        assert_eq!(j["root"]["refine"], "REPLACE");
+        assert_eq!(
+            j["root"]["boundingVolume"]["sphere"],
+            serde_json::json!([0.0, 0.0, 0.0, 5.0])
+        );
+        assert_eq!(j["root"]["children"].as_array().unwrap().len(), 3);
+        assert!(j["root"]["children"][1].get("content").is_none());
+        assert_eq!(
+            j["root"]["children"][2]["extras"]["tessera_nodes"],
+            serde_json::json!([4])
+        );
+    }
+
+    #[test]
+    fn differing_roots_get_the_largest_error_and_a_sphere_around_all() {
+        // Why: the root tile's decision stands for every root, so it must not refine
+        // later than any root would alone (largest error, sphere holding each).
+        const N: u32 = NO_NODE;
+        let nodes = vec![
+            node([N, N], 1.0, [0.0, 0.0, 0.0, 1.0], 1),
+            node([N, N], 3.0, [4.0, 0.0, 0.0, 1.0], 1),
+        ];
+        let t = TileTree::plan(&header(2), &nodes).unwrap();
+        assert_eq!(t.tiles[0].error, 3.0);
+        assert_eq!(t.tiles[0].sphere, [12.0, 20.0, 30.0, 3.0]);
+    }
+
+    #[test]
+    fn a_child_before_its_parent_is_an_error_not_a_loop() {
+        let nodes = vec![node([0, NO_NODE], 1.0, [0.0; 4], 1)];
+        assert!(TileTree::plan(&header(1), &nodes).is_err());
+        assert!(matches!(
+            TileTree::plan(&header(0), &nodes),
+            Err(PlanError::Empty)
+        ));
+    }
+
+    const IDENTITY: [f64; 16] = [
+        1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0,
+    ];
+}
