@@ -80,33 +80,33 @@ pub struct TilesSummary {
 /// Why an export failed; nothing is left at the output when it does.
 #[derive(Debug, thiserror::Error)]
 pub enum TilesError {
-    #[error("{}: not a readable Tessera model: {source}", path.display())]
-    Model { path: PathBuf, source: FormatError },
-    #[error("{}: {source}", path.display())]
-    Plan { path: PathBuf, source: PlanError },
-    #[error("{}: {source}", path.display())]
-    Patch { path: PathBuf, source: FormatError },
+    #[error("{}: not a readable Tessera model: {cause}", path.display())]
+    Model { path: PathBuf, cause: FormatError },
+    #[error("{}: {cause}", path.display())]
+    Plan { path: PathBuf, cause: PlanError },
+    #[error("{}: {cause}", path.display())]
+    Patch { path: PathBuf, cause: FormatError },
     #[error("{} exists and is not a directory: remove it or choose another output", path.display())]
     NotADirectory { path: PathBuf },
     #[error("{} is not empty and holds no tileset.json: refusing to replace it (choose an empty or new directory)", path.display())]
     NotATileset { path: PathBuf },
     #[error("{} already holds a tileset: pass --force to replace it", path.display())]
     Exists { path: PathBuf },
-    #[error("cannot write {}: directory {} does not exist", out.display(), parent.display())]
+    #[error("cannot write {}: {} is not an existing directory", out.display(), parent.display())]
     NoParent { out: PathBuf, parent: PathBuf },
-    #[error("cannot write {}: {source}", path.display())]
+    #[error("cannot write {}: {cause}", path.display())]
     Io {
         path: PathBuf,
-        source: std::io::Error,
+        cause: std::io::Error,
     },
     #[error("interrupted: nothing written")]
     Interrupted,
 }
 
 fn io(path: &Path) -> impl FnOnce(std::io::Error) -> TilesError + '_ {
-    move |source| TilesError::Io {
+    move |cause| TilesError::Io {
         path: path.to_owned(),
-        source,
+        cause,
     }
 }
 
@@ -120,14 +120,14 @@ pub fn export_tiles(
 ) -> Result<TilesSummary, TilesError> {
     let start = Instant::now();
     let replace = check_output(out_dir, opts.force)?;
-    let m = Model::open(model).map_err(|source| TilesError::Model {
+    let m = Model::open(model).map_err(|cause| TilesError::Model {
         path: model.to_owned(),
-        source,
+        cause,
     })?;
     let h = *m.index().header();
-    let tree = TileTree::plan(&h, m.nodes()).map_err(|source| TilesError::Plan {
+    let tree = TileTree::plan(&h, m.nodes()).map_err(|cause| TilesError::Plan {
         path: model.to_owned(),
-        source,
+        cause,
     })?;
     let tmp = Staging::create(out_dir)?;
     std::fs::create_dir(tmp.path.join("tiles")).map_err(io(&tmp.path))?;
@@ -209,9 +209,9 @@ fn write_tile(
     };
     let tile = &tree.tiles[t];
     let h = m.index().header();
-    let bad = |source: FormatError| TilesError::Patch {
+    let bad = |cause: FormatError| TilesError::Patch {
         path: model.to_owned(),
-        source,
+        cause,
     };
     let patches: Vec<PatchData> = tile
         .nodes
@@ -311,6 +311,8 @@ fn parent_of(p: &Path) -> PathBuf {
 /// The temporary directory beside the output; removed on drop unless committed.
 struct Staging {
     path: PathBuf,
+    /// Where a replaced output waits until the new one is in place.
+    aside: PathBuf,
     committed: bool,
 }
 
@@ -324,10 +326,13 @@ impl Staging {
             .duration_since(std::time::UNIX_EPOCH)
             .map(|d| d.subsec_nanos())
             .unwrap_or(0);
-        let path = parent_of(out).join(format!(".{name}.{}.{nanos}.tmp", std::process::id()));
-        std::fs::create_dir(&path).map_err(io(&path))?;
+        let tag = format!("{}-{nanos}", std::process::id());
+        let path = parent_of(out).join(format!(".{name}.tmp-{tag}"));
+        let aside = parent_of(out).join(format!(".{name}.old.tmp-{tag}"));
+        std::fs::create_dir(&path).map_err(io(out))?;
         Ok(Staging {
             path,
+            aside,
             committed: false,
         })
     }
@@ -336,7 +341,7 @@ impl Staging {
     /// aside first and removed after), then syncs the parent directory.
     fn commit(mut self, out: &Path, replace: bool) -> Result<(), TilesError> {
         let parent = parent_of(out);
-        let aside = self.path.with_extension("old");
+        let aside = self.aside.clone();
         if replace {
             std::fs::rename(out, &aside).map_err(io(out))?;
         }
