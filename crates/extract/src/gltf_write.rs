@@ -6,7 +6,7 @@
 //! - One scene, one node (no transform), one mesh. Positions are model coordinates
 //!   (grid points through the model's [`Grid`], as the PLY writer writes them) as `f32`,
 //!   with the `min`/`max` glTF requires; `NORMAL` when the model has normals; indices
-//!   `u32`.
+//!   `u16` when the primitive has at most 65,535 vertices, else `u32`.
 //! - **Untextured** model ([`GltfContent::Welded`]): one primitive, the welded cut of
 //!   `tessera_select::merge_patches` (the same mesh the PLY gets), with
 //!   `COLOR_0` (`FLOAT` RGBA, linear: Tessera's colour bytes are sRGB like a PLY's,
@@ -489,11 +489,23 @@ impl Doc {
             let a = self.accessor(&bytes, n, C::F32, T::Vec4, ArrayBuffer, None);
             attributes.insert(Valid(S::Colors(0)), a);
         }
-        let bytes: Vec<u8> = indices.iter().flat_map(|i| i.to_le_bytes()).collect();
+        // 16-bit indices where they fit (patches mostly do): half the index bytes.
+        let (bytes, component): (Vec<u8>, _) = if n <= usize::from(u16::MAX) {
+            let b = indices
+                .iter()
+                .flat_map(|&i| (i as u16).to_le_bytes())
+                .collect();
+            (b, C::U16)
+        } else {
+            (
+                indices.iter().flat_map(|i| i.to_le_bytes()).collect(),
+                C::U32,
+            )
+        };
         let ind = self.accessor(
             &bytes,
             indices.len(),
-            C::U32,
+            component,
             T::Scalar,
             ElementArrayBuffer,
             None,
@@ -512,6 +524,11 @@ impl Doc {
     /// The file's bytes.
     fn finish(mut self, container: GltfContainer) -> Result<Vec<u8>, FormatError> {
         let io = |detail: String| FormatError::InvalidInput { detail };
+        // The buffer a whole number of words (16-bit indices can end it mid-word), so
+        // the .glb's chunk and the .gltf's buffer are the same bytes.
+        while !self.bin.len().is_multiple_of(4) {
+            self.bin.push(0);
+        }
         if !self.bin.is_empty() {
             self.root.buffers.push(json::Buffer {
                 byte_length: USize64::from(self.bin.len()),
@@ -646,6 +663,11 @@ mod tests {
             let names: Vec<String> = prim.attributes().map(|(s, _)| s.to_string()).collect();
             assert_eq!(names, ["POSITION", "NORMAL", "COLOR_0"]);
             assert_eq!(prim.indices().unwrap().count(), 6);
+            // Four vertices: 16-bit indices.
+            assert_eq!(
+                prim.indices().unwrap().data_type(),
+                ::gltf::accessor::DataType::U16
+            );
             assert_eq!(g.blob.is_some(), c == GltfContainer::Binary);
         }
         let mut names: Vec<String> = std::fs::read_dir(dir.path())
