@@ -18,9 +18,10 @@
 //! optional placement on the Earth ([`frame`]).
 //!
 //! Written atomically: everything goes into a temporary directory beside the output,
-//! every file synced, then renamed into place; an existing output is replaced only when
+//! synced (one `syncfs` on Linux), then renamed into place; an existing output is replaced only when
 //! asked ([`TilesOptions::force`]) and only if it is a tileset. Memory is bounded: a
-//! tile is decoded, encoded and written by one worker of a bounded pool at a time.
+//! tile is decoded, encoded and written by one worker of a bounded pool at a time, and
+//! `tileset.json` is streamed tile by tile.
 
 pub mod frame;
 pub mod plan;
@@ -169,22 +170,35 @@ pub fn export_tiles(
     })?;
     progress.finish_stage();
 
-    let doc = tree.tileset_json(
+    let tileset = tmp.path.join("tileset.json");
+    let file = std::fs::File::create(&tileset).map_err(io(&tileset))?;
+    let mut w = std::io::BufWriter::with_capacity(1 << 20, file);
+    tree.write_tileset_json(
+        &mut w,
         origin,
         to_world,
         &format!("tessera export-tiles {}", env!("CARGO_PKG_VERSION")),
-    );
-    let json = serde_json::to_vec(&doc).map_err(|e| io(out_dir)(std::io::Error::other(e)))?;
-    let tileset = tmp.path.join("tileset.json");
-    write_synced(&tileset, &json)?;
+    )
+    .and_then(|()| w.flush())
+    .map_err(io(&tileset))?;
+    drop(w);
+    let json_bytes = std::fs::metadata(&tileset).map_err(io(&tileset))?.len();
+    sync_tree(&tmp.path)?;
     tmp.commit(out_dir, replace)?;
 
     let files = written.iter().filter(|w| w.0 > 0).count() + 1;
+    tracing::info!(
+        tiles = tree.tiles.len(),
+        files,
+        seconds = start.elapsed().as_secs_f64(),
+        "tileset written to {}",
+        out_dir.display()
+    );
     Ok(TilesSummary {
         tiles: tree.tiles.len(),
         files,
-        bytes: written.iter().map(|w| w.0).sum::<u64>() + json.len() as u64,
-        tileset_bytes: json.len() as u64,
+        bytes: written.iter().map(|w| w.0).sum::<u64>() + json_bytes,
+        tileset_bytes: json_bytes,
         textures: written.iter().map(|w| w.1).sum(),
         triangles: tree.tiles.iter().map(|t| t.triangles).sum(),
         input_triangles: h.input_triangles,
@@ -257,14 +271,46 @@ fn write_tile(
         )
     }
     .map_err(bad)?;
-    write_synced(&dir.join(uri), &bytes)?;
+    write_file(&dir.join(uri), &bytes)?;
     Ok((bytes.len() as u64, summary.textures))
 }
 
-fn write_synced(path: &Path, bytes: &[u8]) -> Result<(), TilesError> {
+fn write_file(path: &Path, bytes: &[u8]) -> Result<(), TilesError> {
     let mut f = std::fs::File::create(path).map_err(io(path))?;
-    f.write_all(bytes).map_err(io(path))?;
-    f.sync_all().map_err(io(path))
+    f.write_all(bytes).map_err(io(path))
+}
+
+/// Makes everything written under `dir` durable before it is renamed into place. On
+/// Linux one `syncfs` of its file system: a file each would cost one `fsync` per tile
+/// (measured on the 30M-triangle sphere: 56,000 of them took most of a minute of the
+/// export). Elsewhere every file and directory is synced in turn.
+fn sync_tree(dir: &Path) -> Result<(), TilesError> {
+    #[cfg(target_os = "linux")]
+    {
+        use std::os::fd::AsRawFd;
+        let d = std::fs::File::open(dir).map_err(io(dir))?;
+        // SAFETY: syncfs takes an open descriptor (d lives across the call).
+        if unsafe { libc::syncfs(d.as_raw_fd()) } != 0 {
+            return Err(io(dir)(std::io::Error::last_os_error()));
+        }
+        Ok(())
+    }
+    #[cfg(not(target_os = "linux"))]
+    {
+        for e in std::fs::read_dir(dir).map_err(io(dir))? {
+            let p = e.map_err(io(dir))?.path();
+            if p.is_dir() {
+                sync_tree(&p)?;
+            } else {
+                std::fs::File::open(&p)
+                    .and_then(|f| f.sync_all())
+                    .map_err(io(&p))?;
+            }
+        }
+        std::fs::File::open(dir)
+            .and_then(|f| f.sync_all())
+            .map_err(io(dir))
+    }
 }
 
 /// Whether an existing output will be replaced; errors for outputs that must not be.

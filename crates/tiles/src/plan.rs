@@ -142,53 +142,74 @@ impl TileTree {
         })
     }
 
-    /// The `tileset.json` document: 3D Tiles 1.1, `REPLACE`, spheres and errors as
-    /// [`Tile`] says, in tileset coordinates (model coordinates minus `origin`), with
-    /// `root_transform` (column-major 4x4, tileset to world) on the root. Each tile's
-    /// `extras.tessera_nodes` lists the nodes of its content.
-    pub fn tileset_json(
+    /// Writes the `tileset.json` document to `w`: 3D Tiles 1.1, `REPLACE`, spheres and
+    /// errors as [`Tile`] says, in tileset coordinates (model coordinates minus
+    /// `origin`), with `root_transform` (column-major 4x4, tileset to world) on the
+    /// root. Each tile's `extras.tessera_nodes` lists the nodes of its content. Streamed
+    /// tile by tile (a model of millions of nodes never holds its document in memory);
+    /// the recursion is as deep as the hierarchy (at most 64 levels).
+    pub fn write_tileset_json(
         &self,
+        w: &mut dyn std::io::Write,
         origin: [f64; 3],
         root_transform: [f64; 16],
         generator: &str,
-    ) -> serde_json::Value {
-        use serde_json::{json, Map, Value};
-        // Built bottom-up (children have larger indices than their parent), so deep
-        // trees need no recursion.
-        let mut built: Vec<Option<Value>> = vec![None; self.tiles.len()];
-        for t in (0..self.tiles.len()).rev() {
-            let tile = &self.tiles[t];
-            let s = tile.sphere;
-            let mut o = Map::new();
-            o.insert(
-                "boundingVolume".into(),
-                json!({ "sphere": [s[0] - origin[0], s[1] - origin[1], s[2] - origin[2], s[3]] }),
-            );
-            o.insert("geometricError".into(), json!(tile.error));
-            if t == 0 {
-                o.insert("refine".into(), json!("REPLACE"));
-                o.insert("transform".into(), json!(root_transform.to_vec()));
-            }
-            if let Some(uri) = self.content_uri(t) {
-                o.insert("content".into(), json!({ "uri": uri }));
-            }
-            if !tile.children.is_empty() {
-                let children: Vec<Value> = tile
-                    .children
-                    .iter()
-                    .map(|&c| built[c].take().expect("a child is built before its parent"))
-                    .collect();
-                o.insert("children".into(), Value::Array(children));
-            }
-            o.insert("extras".into(), json!({ "tessera_nodes": tile.nodes }));
-            built[t] = Some(Value::Object(o));
+    ) -> std::io::Result<()> {
+        let js = |v: serde_json::Value| serde_json::to_string(&v).map_err(std::io::Error::other);
+        write!(
+            w,
+            "{{\"asset\":{},\"geometricError\":{},\"root\":",
+            js(serde_json::json!({ "version": "1.1", "generator": generator }))?,
+            js(serde_json::json!(self.tiles[0].error))?
+        )?;
+        self.write_tile(w, 0, origin, &root_transform, &js)?;
+        writeln!(w, "}}")
+    }
+
+    fn write_tile(
+        &self,
+        w: &mut dyn std::io::Write,
+        t: usize,
+        origin: [f64; 3],
+        root_transform: &[f64; 16],
+        js: &dyn Fn(serde_json::Value) -> std::io::Result<String>,
+    ) -> std::io::Result<()> {
+        use serde_json::json;
+        let tile = &self.tiles[t];
+        let s = tile.sphere;
+        let sphere = [s[0] - origin[0], s[1] - origin[1], s[2] - origin[2], s[3]];
+        write!(
+            w,
+            "{{\"boundingVolume\":{{\"sphere\":{}}},\"geometricError\":{}",
+            js(json!(sphere))?,
+            js(json!(tile.error))?
+        )?;
+        if t == 0 {
+            write!(
+                w,
+                ",\"refine\":\"REPLACE\",\"transform\":{}",
+                js(json!(root_transform.to_vec()))?
+            )?;
         }
-        let root = built[0].take().expect("the root tile");
-        json!({
-            "asset": { "version": "1.1", "generator": generator },
-            "geometricError": self.tiles[0].error,
-            "root": root,
-        })
+        if let Some(uri) = self.content_uri(t) {
+            write!(w, ",\"content\":{{\"uri\":{}}}", js(json!(uri))?)?;
+        }
+        write!(
+            w,
+            ",\"extras\":{{\"tessera_nodes\":{}}}",
+            js(json!(tile.nodes))?
+        )?;
+        if !tile.children.is_empty() {
+            write!(w, ",\"children\":[")?;
+            for (k, &c) in tile.children.iter().enumerate() {
+                if k > 0 {
+                    write!(w, ",")?;
+                }
+                self.write_tile(w, c, origin, root_transform, js)?;
+            }
+            write!(w, "]")?;
+        }
+        write!(w, "}}")
     }
 }
 
@@ -246,7 +267,10 @@ mod tests {
         // Node 3 holds no triangles: a tile without content.
         let empty = t.tiles.iter().position(|x| x.nodes == [3]).unwrap();
         assert_eq!(t.content_uri(empty), None);
-        let j = t.tileset_json([14.0, 20.0, 30.0], IDENTITY, "test");
+        let mut bytes = Vec::new();
+        t.write_tileset_json(&mut bytes, [14.0, 20.0, 30.0], IDENTITY, "test")
+            .unwrap();
+        let j: serde_json::Value = serde_json::from_slice(&bytes).unwrap();
         assert_eq!(j["asset"]["version"], "1.1");
         assert_eq!(j["root"]["refine"], "REPLACE");
         assert_eq!(
