@@ -91,6 +91,13 @@ fn export_tiles_writes_a_tileset_and_refuses_what_it_must() {
     std::fs::write(full.join("notes.txt"), "mine").unwrap();
     let file = work.path().join("file");
     std::fs::write(&file, "x").unwrap();
+    // A model with one byte of its last patch flipped: its index is fine, the patch
+    // fails its checksum half way through the export.
+    let corrupt = work.path().join("corrupt.tsr");
+    let mut bytes = std::fs::read(&built.model_path).unwrap();
+    let last = bytes.len() - 10;
+    bytes[last] ^= 0xff;
+    std::fs::write(&corrupt, bytes).unwrap();
     let cases: Vec<(Vec<std::ffi::OsString>, &str)> = vec![
         (
             vec![
@@ -99,6 +106,14 @@ fn export_tiles_writes_a_tileset_and_refuses_what_it_must() {
                 work.path().join("a").into(),
             ],
             "not a readable Tessera model",
+        ),
+        (
+            vec![
+                corrupt.clone().into(),
+                "-o".into(),
+                work.path().join("e").into(),
+            ],
+            "checksum",
         ),
         (
             vec![
@@ -184,7 +199,7 @@ fn export_tiles_writes_a_tileset_and_refuses_what_it_must() {
     names.sort();
     assert_eq!(
         names,
-        ["file", "full", "mesh.ply", "placed", "tiles"],
+        ["corrupt.tsr", "file", "full", "mesh.ply", "placed", "tiles"],
         "nothing else written"
     );
     assert!(leftovers(work.path()).is_empty());
