@@ -8,10 +8,10 @@
 //!   here in Rust over the parsed `tileset.json`, for hundreds of random cameras and
 //!   thresholds on the Bunny (built with small nodes for a deep tree) and a closed
 //!   sphere: the contents it picks, merged, have no boundary edge the full-resolution
-//!   mesh lacks and no non-manifold edge, and (measured: all 300 of each) it is the very
-//!   cut `tessera_select::select_cut` picks for the view. Negative control: the same tileset with each
-//!   tile's bounding sphere replaced by its patch's tight sphere (mates then disagree)
-//!   does show cracks.
+//!   mesh lacks and no non-manifold edge, and (measured: all 300 of each) it is the
+//!   very cut `tessera_select::select_cut` picks for the view. Negative control: the
+//!   same tileset with each tile's bounding sphere replaced by its patch's tight sphere
+//!   (mates then disagree) does show cracks.
 //! - `the_tileset_is_structurally_valid_and_in_model_coordinates`: the structural rules
 //!   of the specification that `3d-tiles-tools` 0.5.4 has no validator for (it has no
 //!   `validate` command): asset version, `REPLACE`, geometric errors never above the
