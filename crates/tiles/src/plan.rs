@@ -1,8 +1,9 @@
 //! The diamond hierarchy as a 3D Tiles tree (`docs/tiles.md` has the argument).
 //!
 //! One tile per node with a parent, one root tile for all the roots. A tile's content is
-//! its node's patch, its `geometricError` the node's saturated error and its bounding
-//! sphere the node's saturated sphere; `refine` is `REPLACE` (inherited from the root).
+//! its node's patch, its `geometricError` the node's saturated error (scaled by
+//! [`LEVEL_ERROR_SCALE`] per level, so that it strictly decreases down the tree) and its
+//! bounding sphere the node's saturated sphere; `refine` is `REPLACE` (inherited from the root).
 //! A 3D Tiles client refines a tile when `geometricError * height_px / (2 d tan(fov/2))`
 //! exceeds its maximum screen-space error, `d` the distance from the eye to the bounding
 //! volume: Tessera's own test (`tessera_select::needs_refinement`) with the tolerance
@@ -20,13 +21,30 @@
 
 use tessera_format::{Header, NodeRecord, NO_NODE};
 
+/// Each level down the tree scales `geometricError` by this (1 - 2^-20), so that a
+/// child's error is strictly below its parent's even where their saturated errors are
+/// equal (saturation makes them equal often). 3DTilesRendererJS (0.5.3,
+/// `traverseFunctions.js`, its issue #1304) refines a tile *unconditionally* when its
+/// error is not below its nearest ancestor's, whatever the screen-space error: with
+/// equal errors it refined some mates and not others, and the exported 30M-triangle
+/// sphere showed cracks there. Mates share their level, so they keep identical errors;
+/// the change to any screen-space error is under 2^-20 x 64 levels = 6e-5 of it.
+pub const LEVEL_ERROR_SCALE: f64 = 1.0 - 1.0 / 1048576.0;
+
+/// A node's `geometricError`: its saturated error scaled by [`LEVEL_ERROR_SCALE`] once
+/// per level.
+pub fn tile_error(error: f32, level: u8) -> f64 {
+    f64::from(error) * LEVEL_ERROR_SCALE.powi(i32::from(level))
+}
+
 /// One tile of the tree.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Tile {
     /// The nodes whose patches are the tile's content (the roots for the root tile,
     /// else one node).
     pub nodes: Vec<u32>,
-    /// `geometricError`: the saturated error of the nodes (model units).
+    /// `geometricError`: the saturated error of the nodes (model units), scaled by
+    /// [`LEVEL_ERROR_SCALE`] per level.
     pub error: f64,
     /// `boundingVolume.sphere`: the saturated sphere, model coordinates (centre xyz,
     /// radius).
@@ -88,13 +106,13 @@ impl TileTree {
         let first = &nodes[0];
         let mut root = Tile {
             nodes: (0..roots as u32).collect(),
-            error: f64::from(first.error),
+            error: tile_error(first.error, first.level),
             sphere: model_sphere(h, first.saturated_sphere),
             children: Vec::new(),
             triangles: 0,
         };
         for n in &nodes[..roots] {
-            root.error = root.error.max(f64::from(n.error));
+            root.error = root.error.max(tile_error(n.error, n.level));
             root.sphere = sphere_around(root.sphere, model_sphere(h, n.saturated_sphere));
             root.triangles += u64::from(n.triangle_count);
         }
@@ -118,7 +136,7 @@ impl TileTree {
                 let t = tiles.len();
                 tiles.push(Tile {
                     nodes: vec![c],
-                    error: f64::from(cn.error),
+                    error: tile_error(cn.error, cn.level),
                     sphere: model_sphere(h, cn.saturated_sphere),
                     children: Vec::new(),
                     triangles: u64::from(cn.triangle_count),
@@ -297,6 +315,27 @@ mod tests {
         let t = TileTree::plan(&header(2), &nodes).unwrap();
         assert_eq!(t.tiles[0].error, 3.0);
         assert_eq!(t.tiles[0].sphere, [12.0, 20.0, 30.0, 3.0]);
+    }
+
+    #[test]
+    fn errors_strictly_decrease_down_the_tree_and_mates_keep_theirs() {
+        // Why: 3DTilesRendererJS refines a tile unconditionally when its error is not
+        // below its parent's; saturation often gives a child its parent's error.
+        const N: u32 = NO_NODE;
+        let mut nodes = vec![
+            node([1, 2], 2.0, [0.0, 0.0, 0.0, 4.0], 1),
+            node([N, N], 2.0, [-1.0, 0.0, 0.0, 2.0], 1),
+            node([N, N], 2.0, [1.0, 0.0, 0.0, 2.0], 1),
+        ];
+        nodes[1].level = 1;
+        nodes[2].level = 1;
+        let t = TileTree::plan(&header(1), &nodes).unwrap();
+        let (root, a, b) = (t.tiles[0].error, t.tiles[1].error, t.tiles[2].error);
+        assert!(a < root && a > root * 0.999_999, "{a} vs {root}");
+        assert_eq!(a, b, "mates (one level, one saturated error) stay equal");
+        assert_eq!(tile_error(0.0, 7), 0.0);
+        // Over the deepest hierarchy the scale stays within 1e-4 of the error.
+        assert!(tile_error(1.0, 64) > 0.9999);
     }
 
     #[test]
