@@ -31,7 +31,7 @@ Output formats (chosen by the extension of -o):
   .ply   Binary PLY: the welded cut, positions in model coordinates, normals, colours
          (RGBA bytes) and the source texture coordinates where the model has them.
   .glb   glTF 2.0 binary, one file (MeshLab, Blender, glTF viewers). Positions in model
-         coordinates (f32), normals, indices (u32). Untextured model: one primitive, the
+         coordinates (f32), normals, indices (u16 where they fit, else u32). Untextured model: one primitive, the
          same welded mesh as the PLY, with COLOR_0 (linear RGBA floats) when the model has
          colours. Textured model: one primitive and one material per patch, its
          baseColorTexture that patch's texture (PNG, lossless; clamp to edge, linear

@@ -8,7 +8,7 @@ use std::process::ExitCode;
 #[derive(clap::Args)]
 pub struct Args {
     /// Model files (.tsr) and directories (every .tsr in them, rescanned for new builds).
-    #[arg(required = true, value_name = "MODEL_OR_DIR")]
+    #[arg(required_unless_present = "tiles", value_name = "MODEL_OR_DIR")]
     inputs: Vec<PathBuf>,
     /// Address to listen on; port 0 picks a free port (the bound address is printed).
     #[arg(long, default_value = "127.0.0.1:8080")]
@@ -24,6 +24,10 @@ pub struct Args {
     /// Serve no viewer page: only the models and the catalogue.
     #[arg(long)]
     no_web: bool,
+    /// A 3D Tiles tileset directory (`tessera export-tiles` output) to serve at
+    /// /tiles/NAME/tileset.json, NAME the directory's name (repeatable).
+    #[arg(long, value_name = "DIR")]
+    tiles: Vec<PathBuf>,
 }
 
 pub fn run(a: Args) -> anyhow::Result<ExitCode> {
@@ -32,6 +36,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         max_connections: a.max_connections,
         web_dir: a.web.clone(),
         embedded_web: !a.no_web,
+        tiles: a.tiles.clone(),
         ..Default::default()
     };
     let embedded = !tessera_serve::EMBEDDED_WEB.is_empty();
@@ -48,6 +53,13 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         }
         for n in &names {
             println!("  http://{addr}/models/{n}");
+        }
+        for t in &a.tiles {
+            let name = std::fs::canonicalize(t)
+                .ok()
+                .and_then(|c| c.file_name().map(|n| n.to_string_lossy().into_owned()))
+                .unwrap_or_default();
+            println!("  tileset http://{addr}/tiles/{name}/tileset.json");
         }
         println!("catalogue: http://{addr}/api/models (Ctrl-C stops; TESSERA_LOG=info logs every request)");
     })?;

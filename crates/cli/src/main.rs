@@ -5,6 +5,7 @@
 
 mod cmd_build;
 mod cmd_demo;
+mod cmd_export_tiles;
 mod cmd_extract;
 mod cmd_gen;
 mod cmd_info;
@@ -39,6 +40,8 @@ enum Command {
     Verify(cmd_verify::Args),
     /// Select a cut of the hierarchy and write it as one mesh (PLY, glTF or GLB).
     Extract(cmd_extract::Args),
+    /// Export a model as an OGC 3D Tiles 1.1 tileset (tileset.json + one .glb per tile).
+    ExportTiles(cmd_export_tiles::Args),
     /// Generate deterministic test meshes (binary PLY; OBJ + MTL + images for `textured`).
     Gen(cmd_gen::Args),
     /// Render a camera path or an orbit to PNG frames with per-frame statistics.
@@ -77,6 +80,7 @@ fn main() -> ExitCode {
         Command::Info(a) => cmd_info::run(a),
         Command::Verify(a) => cmd_verify::run(a),
         Command::Extract(a) => cmd_extract::run(a),
+        Command::ExportTiles(a) => cmd_export_tiles::run(a),
         Command::Gen(a) => cmd_gen::run(a),
         Command::Render(a) => cmd_render::run(a),
         Command::Serve(a) => cmd_serve::run(a),

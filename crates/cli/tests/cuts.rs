@@ -73,24 +73,10 @@ fn on_border(n: u32, a: [u32; 3], b: [u32; 3]) -> bool {
 
 /// (boundary edges, boundary edges not on the border) of a merged cut.
 fn boundary_edges_off_border(mesh: &tessera_select::CutMesh, n: u32) -> (u64, u64) {
-    let mut uses: HashMap<([u32; 3], [u32; 3]), u32> = HashMap::new();
-    for t in mesh.indices.chunks_exact(3) {
-        let c = [0, 1, 2].map(|k| mesh.positions[t[k] as usize]);
-        if c[0] == c[1] || c[1] == c[2] || c[2] == c[0] {
-            continue;
-        }
-        for (a, b) in [(c[0], c[1]), (c[1], c[2]), (c[2], c[0])] {
-            *uses.entry(if a < b { (a, b) } else { (b, a) }).or_default() += 1;
-        }
-    }
-    let boundary: Vec<_> = uses
-        .into_iter()
-        .filter(|(_, u)| *u == 1)
-        .map(|(e, _)| e)
-        .collect();
+    let boundary = tessera_select::boundary_edges(&mesh.indices, &mesh.positions);
     let off = boundary
         .iter()
-        .filter(|(a, b)| !on_border(n, *a, *b))
+        .filter(|[a, b]| !on_border(n, *a, *b))
         .count() as u64;
     (boundary.len() as u64, off)
 }

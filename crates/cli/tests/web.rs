@@ -51,14 +51,14 @@
 
 mod common;
 
-use std::io::{BufRead, BufReader, Read, Write};
+use std::io::{Read, Write};
 use std::net::{SocketAddr, TcpListener};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 
 use common::*;
 use serde_json::{json, Value};
-use tessera_image::{psnr, Image};
+use tessera_image::{coverage, iou, psnr, Image};
 use tessera_select::Camera;
 
 /// PSNR the browser's frame must reach against `tessera render --complete` of the same
@@ -124,14 +124,6 @@ fn chromium() -> PathBuf {
     p
 }
 
-struct Running(Child);
-impl Drop for Running {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
 /// `tessera serve DIR --addr 127.0.0.1:0 --web WEB`; the address from its first line.
 fn serve(dir: &Path, web: &Path) -> (Running, SocketAddr) {
     serve_with(dir, Some(web))
@@ -140,27 +132,10 @@ fn serve(dir: &Path, web: &Path) -> (Running, SocketAddr) {
 /// `tessera serve DIR --addr 127.0.0.1:0`, with `--web WEB` when given (else the viewer
 /// built into the binary).
 fn serve_with(dir: &Path, web: Option<&Path>) -> (Running, SocketAddr) {
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_tessera"));
-    cmd.arg("serve").arg(dir).args(["--addr", "127.0.0.1:0"]);
-    if let Some(web) = web {
-        cmd.arg("--web").arg(web);
+    match web {
+        Some(web) => serve_tessera(args![dir, "--web", web]),
+        None => serve_tessera(args![dir]),
     }
-    let mut child = Running(
-        cmd.stdout(Stdio::piped())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
-    let mut out = BufReader::new(child.0.stdout.take().unwrap());
-    let mut line = String::new();
-    out.read_line(&mut line).unwrap();
-    let addr: SocketAddr = line
-        .trim()
-        .rsplit_once(" at http://")
-        .and_then(|(_, a)| a.trim_end_matches('/').parse().ok())
-        .unwrap_or_else(|| panic!("unexpected first line of tessera serve: {line}"));
-    std::thread::spawn(move || std::io::copy(&mut out, &mut std::io::sink()));
-    (child, addr)
 }
 
 /// A minimal static server of one file at any path, with single range requests and
@@ -247,48 +222,9 @@ fn browse(visits: Value, extra_args: &[&str], dir: &Path) -> Vec<Value> {
     })
 }
 
-fn encode(s: &str) -> String {
-    s.bytes()
-        .map(|b| {
-            if b.is_ascii_alphanumeric() || b"-._~".contains(&b) {
-                (b as char).to_string()
-            } else {
-                format!("%{b:02X}")
-            }
-        })
-        .collect()
-}
-
 /// `tessera render --complete` of `camera`: the frame and its triangle count.
 fn render(model: &Path, camera: &str, out: &Path) -> (Image, u64) {
-    let path = out.with_extension("json");
-    let stats = out.with_extension("stats.json");
-    std::fs::write(
-        &path,
-        format!(r#"{{"frames": 1, "keyframes": [{camera}}}]}}"#),
-    )
-    .unwrap();
-    let (code, _, stderr) = run_tessera(args![
-        "render",
-        model,
-        "--path",
-        path,
-        "--complete",
-        "--out",
-        out,
-        "--width",
-        WIDTH.to_string(),
-        "--height",
-        HEIGHT.to_string(),
-        "--stats",
-        stats
-    ]);
-    assert_eq!(code, 0, "{stderr}");
-    let stats: Value = serde_json::from_slice(&std::fs::read(&stats).unwrap()).unwrap();
-    (
-        Image::load_png(&out.join("frame_00000.png")).unwrap(),
-        stats["frames"][0]["triangles"].as_u64().unwrap(),
-    )
+    render_complete(model, &format!("{camera}}}"), out, (WIDTH, HEIGHT), &[])
 }
 
 /// Picking through the depth buffer (browser.mjs "pick"): the point under the centre
@@ -1992,26 +1928,9 @@ fn the_page_draws_a_textured_scan_as_tessera_render() {
     );
 }
 
-/// Pixels of `img` that are not its corner pixel's colour (the background): a mask.
-fn coverage(img: &Image) -> Vec<bool> {
-    let bg = img.pixel(0, 0);
-    img.rgba
-        .chunks_exact(4)
-        .map(|p| (0..3).map(|c| u32::from(p[c].abs_diff(bg[c]))).sum::<u32>() > 24)
-        .collect()
-}
-
 /// The page's own geometries (three.html: before the model was added).
 fn d_own(t: &Value) -> u64 {
     t["dispose"]["own_geometries"].as_u64().unwrap()
-}
-
-/// Intersection over union of two masks of one size.
-fn iou(a: &[bool], b: &[bool]) -> f64 {
-    assert_eq!(a.len(), b.len());
-    let both = a.iter().zip(b).filter(|(x, y)| **x && **y).count();
-    let either = a.iter().zip(b).filter(|(x, y)| **x || **y).count();
-    both as f64 / either.max(1) as f64
 }
 
 /// Intersection over union the three.js page's model must reach against `tessera render

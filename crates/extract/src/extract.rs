@@ -104,13 +104,7 @@ pub fn extract_nodes_keeping<M: PatchReader + ?Sized>(
 
 /// The welded mesh of decoded patches ([`merge_patches`]).
 fn merge(patches: &[PatchData]) -> CutMesh {
-    merge_patches(patches.iter().map(|p| PatchRef {
-        positions: &p.positions,
-        normals: &p.normals,
-        colors: &p.colors,
-        uvs: &p.uvs,
-        indices: &p.indices,
-    }))
+    merge_patches(patches.iter().map(PatchRef::from))
 }
 
 /// Writes a merged cut as a binary PLY in model coordinates (grid points through `grid`,

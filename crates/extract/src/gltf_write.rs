@@ -6,7 +6,7 @@
 //! - One scene, one node (no transform), one mesh. Positions are model coordinates
 //!   (grid points through the model's [`Grid`], as the PLY writer writes them) as `f32`,
 //!   with the `min`/`max` glTF requires; `NORMAL` when the model has normals; indices
-//!   `u32`.
+//!   `u16` when the primitive has at most 65,535 vertices, else `u32`.
 //! - **Untextured** model ([`GltfContent::Welded`]): one primitive, the welded cut of
 //!   `tessera_select::merge_patches` (the same mesh the PLY gets), with
 //!   `COLOR_0` (`FLOAT` RGBA, linear: Tessera's colour bytes are sRGB like a PLY's,
@@ -23,6 +23,12 @@
 //!   textures already hold the untextured vertices' colours, in solid-colour charts).
 //! - Materials are `metallicFactor` 0, `roughnessFactor` 1 (a scan is not metal; the
 //!   glTF default metallic 1 renders it dark), opaque, single-sided.
+//!
+//! - Frames ([`GltfFrame`]): `tessera extract` writes model coordinates as they are;
+//!   3D Tiles content (`tessera-tiles`, through [`encode_gltf`]) writes positions
+//!   relative to the tile's centre, the node translated to it, and the axes turned to
+//!   glTF's +Y up. Stored PNG and JPEG patch textures go in as they are when the patch
+//!   was decoded without its texels.
 //!
 //! The whole file is assembled in memory (cuts are small: the model itself is never
 //! held) and written through [`AtomicFile`]: nothing appears at the path unless the
@@ -100,6 +106,73 @@ pub fn write_cut_gltf(
     container: GltfContainer,
     name: &str,
 ) -> Result<GltfSummary, FormatError> {
+    let (bytes, summary) = encode_gltf(grid, content, &GltfFrame::MODEL, container, name)?;
+    let mut f = AtomicFile::create(path, 1 << 20)?;
+    f.write_all(&bytes)
+        .map_err(|e| FormatError::io(f.tmp_path(), e))?;
+    f.commit()?;
+    Ok(summary)
+}
+
+/// Where the glTF's coordinates are: model coordinates minus `origin`, turned to glTF's
+/// +Y up when `y_up`, and the scene's one node translated by `translation` (model
+/// axes, written in the glTF's). Small coordinates keep `f32` precision on
+/// georeferenced models: 3D Tiles content ([`GltfFrame::tile`]) has each tile's centre
+/// as `origin` and that centre relative to the tileset's own origin as `translation`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GltfFrame {
+    /// Model-space point subtracted from every position (in f64) before it is rounded
+    /// to `f32`.
+    pub origin: [f64; 3],
+    /// Model axes are +Z up (3D Tiles' convention): write `(x, z, -y)` for the model's
+    /// `(x, y, z)` (positions, normals, the translation), the inverse of the Y-up to
+    /// Z-up rotation 3D Tiles clients apply to glTF content, so that the tileset sees
+    /// model axes.
+    pub y_up: bool,
+    /// The node's translation, model axes (none when zero).
+    pub translation: [f64; 3],
+}
+
+impl GltfFrame {
+    /// Model coordinates as they are (`tessera extract`): no offset, no rotation.
+    pub const MODEL: GltfFrame = GltfFrame {
+        origin: [0.0; 3],
+        y_up: false,
+        translation: [0.0; 3],
+    };
+
+    /// 3D Tiles content of a tile centred at `centre` (model coordinates) in a tileset
+    /// whose coordinates are model coordinates minus `tileset_origin`: positions
+    /// relative to the centre, the node translated by `centre - tileset_origin`, axes
+    /// turned to glTF's +Y up.
+    pub fn tile(centre: [f64; 3], tileset_origin: [f64; 3]) -> GltfFrame {
+        GltfFrame {
+            origin: centre,
+            y_up: true,
+            translation: [0, 1, 2].map(|k| centre[k] - tileset_origin[k]),
+        }
+    }
+
+    /// A model-space vector in the glTF's axes.
+    pub fn axes(&self, v: [f64; 3]) -> [f64; 3] {
+        if self.y_up {
+            [v[0], v[2], -v[1]]
+        } else {
+            v
+        }
+    }
+}
+
+/// [`write_cut_gltf`]'s document as bytes, in `frame` (not written anywhere): what a
+/// caller that writes many files (3D Tiles export) encodes in parallel. Errors name the
+/// node; the file they go to is the caller's to name.
+pub fn encode_gltf(
+    grid: &Grid,
+    content: GltfContent<'_>,
+    frame: &GltfFrame,
+    container: GltfContainer,
+    name: &str,
+) -> Result<(Vec<u8>, GltfSummary), FormatError> {
     let mut doc = Doc::new();
     let mut summary = GltfSummary::default();
     let mut primitives = Vec::new();
@@ -110,6 +183,7 @@ pub fn write_cut_gltf(
                 let material = doc.material(name.to_string(), None);
                 primitives.push(doc.primitive(
                     grid,
+                    frame,
                     &mesh.positions,
                     &mesh.normals,
                     &mesh.uvs,
@@ -133,33 +207,14 @@ pub fn write_cut_gltf(
                 if p.triangle_count() == 0 {
                     continue;
                 }
-                let bad = |what: &str| {
-                    FormatError::io(
-                        path,
-                        std::io::Error::other(format!(
-                            "node {node}: a textured patch {what} (decode it with decode_patch)"
-                        )),
-                    )
+                let bad = |what: &str| FormatError::InvalidInput {
+                    detail: format!(
+                        "node {node}: a textured patch {what} (decode it with decode_patch)"
+                    ),
                 };
                 let t = p.texture.as_ref().ok_or_else(|| bad("has no texture"))?;
-                // BC7 textures come decoded as blocks: their texels for the PNG.
-                let decoded;
-                let t = if t.rgba.is_empty() && !t.blocks.is_empty() {
-                    let mut d = PatchTexture {
-                        rgba: Vec::new(),
-                        mips: Vec::new(),
-                        ..t.clone()
-                    };
-                    d.decode_rgba().map_err(|e| e.with_node(node))?;
-                    decoded = d;
-                    &decoded
-                } else {
-                    t
-                };
-                let texels = 4 * t.width as usize * t.height as usize;
-                if t.rgba.len() != texels || texels == 0 {
-                    return Err(bad("has no decoded texels"));
-                }
+                let (image, mime) = texture_image(t).map_err(|e| e.with_node(node))?;
+                let image = image.ok_or_else(|| bad("has no decoded texels"))?;
                 if p.uvs.len() != p.positions.len() || p.chart_ids.len() != p.positions.len() {
                     return Err(bad("lacks UVs or chart ids"));
                 }
@@ -174,15 +229,12 @@ pub fn write_cut_gltf(
                             .ok_or_else(|| bad("has a chart id out of range"))
                     })
                     .collect::<Result<Vec<[f32; 2]>, FormatError>>()?;
-                let png = PatchTexture::encode(t.width, t.height, &t.rgba, TextureCodec::Png, 100)
-                    .map_err(|e| e.with_node(node))?
-                    .encoded;
-                summary.texture_bytes += png.len() as u64;
+                summary.texture_bytes += image.len() as u64;
                 summary.textures += 1;
-                let view = doc.view(&png, None);
+                let view = doc.view(&image, None);
                 let image = doc.root.push(json::Image {
                     buffer_view: Some(view),
-                    mime_type: Some(json::image::MimeType("image/png".into())),
+                    mime_type: Some(json::image::MimeType(mime.into())),
                     name: Some(format!("node {node}")),
                     uri: None,
                     extensions: Default::default(),
@@ -198,6 +250,7 @@ pub fn write_cut_gltf(
                 let material = doc.material(format!("node {node}"), Some(texture));
                 primitives.push(doc.primitive(
                     grid,
+                    frame,
                     &p.positions,
                     &p.normals,
                     &uvs,
@@ -217,9 +270,11 @@ pub fn write_cut_gltf(
             extensions: Default::default(),
             extras: Default::default(),
         });
+        let t = frame.axes(frame.translation);
         let node = doc.root.push(json::Node {
             mesh: Some(mesh),
             name: Some(name.to_string()),
+            translation: (t != [0.0; 3]).then(|| t.map(|x| x as f32)),
             ..Default::default()
         });
         let scene = doc.root.push(json::Scene {
@@ -230,8 +285,45 @@ pub fn write_cut_gltf(
         });
         doc.root.scene = Some(scene);
     }
-    summary.bytes = doc.write(path, container)?;
-    Ok(summary)
+    let bytes = doc.finish(container)?;
+    summary.bytes = bytes.len() as u64;
+    Ok((bytes, summary))
+}
+
+/// A patch texture as a glTF image and its MIME type: a stored PNG or JPEG as it is
+/// (when the patch was decoded without its texels, `decode_patch_with(.., false)`),
+/// otherwise its decoded texels (decoded here from BC7 when they are not) re-encoded as
+/// PNG, losslessly. `None` when it has neither.
+fn texture_image(t: &PatchTexture) -> Result<(Option<Vec<u8>>, &'static str), FormatError> {
+    match t.codec {
+        Some(TextureCodec::Png) if !t.encoded.is_empty() => {
+            return Ok((Some(t.encoded.clone()), "image/png"))
+        }
+        Some(TextureCodec::Jpeg) if !t.encoded.is_empty() => {
+            return Ok((Some(t.encoded.clone()), "image/jpeg"))
+        }
+        _ => {}
+    }
+    // BC7 textures come as blocks or still encoded: their texels for the PNG.
+    let decoded;
+    let t = if t.rgba.is_empty() && (!t.blocks.is_empty() || !t.encoded.is_empty()) {
+        let mut d = PatchTexture {
+            rgba: Vec::new(),
+            mips: Vec::new(),
+            ..t.clone()
+        };
+        d.decode_rgba()?;
+        decoded = d;
+        &decoded
+    } else {
+        t
+    };
+    let texels = 4 * t.width as usize * t.height as usize;
+    if t.rgba.len() != texels || texels == 0 {
+        return Ok((None, "image/png"));
+    }
+    let png = PatchTexture::encode(t.width, t.height, &t.rgba, TextureCodec::Png, 100)?.encoded;
+    Ok((Some(png), "image/png"))
 }
 
 /// An sRGB colour byte as glTF's linear value (alpha is linear coverage, kept).
@@ -346,6 +438,7 @@ impl Doc {
     fn primitive(
         &mut self,
         grid: &Grid,
+        frame: &GltfFrame,
         positions: &[[u32; 3]],
         normals: &[[f32; 3]],
         uvs: &[[f32; 2]],
@@ -361,7 +454,10 @@ impl Doc {
         let mut hi = [f32::NEG_INFINITY; 3];
         let mut bytes = Vec::with_capacity(12 * n);
         for &q in positions {
-            let p = grid.position(q).map(|x| x as f32);
+            let m = grid.position(q);
+            let p = frame
+                .axes([0, 1, 2].map(|k| m[k] - frame.origin[k]))
+                .map(|x| x as f32);
             for k in 0..3 {
                 lo[k] = lo[k].min(p[k]);
                 hi[k] = hi[k].max(p[k]);
@@ -372,6 +468,13 @@ impl Doc {
         let pos = self.accessor(&bytes, n, C::F32, T::Vec3, ArrayBuffer, Some((lo, hi)));
         attributes.insert(Valid(S::Positions), pos);
         if normals.len() == n && n > 0 {
+            let turned: Vec<[f32; 3]>;
+            let normals = if frame.y_up {
+                turned = normals.iter().map(|&[x, y, z]| [x, z, -y]).collect();
+                &turned[..]
+            } else {
+                normals
+            };
             let bytes = f32_bytes(normals.iter().flatten());
             let a = self.accessor(&bytes, n, C::F32, T::Vec3, ArrayBuffer, None);
             attributes.insert(Valid(S::Normals), a);
@@ -386,11 +489,23 @@ impl Doc {
             let a = self.accessor(&bytes, n, C::F32, T::Vec4, ArrayBuffer, None);
             attributes.insert(Valid(S::Colors(0)), a);
         }
-        let bytes: Vec<u8> = indices.iter().flat_map(|i| i.to_le_bytes()).collect();
+        // 16-bit indices where they fit (patches mostly do): half the index bytes.
+        let (bytes, component): (Vec<u8>, _) = if n <= usize::from(u16::MAX) {
+            let b = indices
+                .iter()
+                .flat_map(|&i| (i as u16).to_le_bytes())
+                .collect();
+            (b, C::U16)
+        } else {
+            (
+                indices.iter().flat_map(|i| i.to_le_bytes()).collect(),
+                C::U32,
+            )
+        };
         let ind = self.accessor(
             &bytes,
             indices.len(),
-            C::U32,
+            component,
             T::Scalar,
             ElementArrayBuffer,
             None,
@@ -406,9 +521,14 @@ impl Doc {
         }
     }
 
-    /// Writes the file; returns its length.
-    fn write(mut self, path: &Path, container: GltfContainer) -> Result<u64, FormatError> {
-        let io = |e: std::io::Error| FormatError::io(path, e);
+    /// The file's bytes.
+    fn finish(mut self, container: GltfContainer) -> Result<Vec<u8>, FormatError> {
+        let io = |detail: String| FormatError::InvalidInput { detail };
+        // The buffer a whole number of words (16-bit indices can end it mid-word), so
+        // the .glb's chunk and the .gltf's buffer are the same bytes.
+        while !self.bin.len().is_multiple_of(4) {
+            self.bin.push(0);
+        }
         if !self.bin.is_empty() {
             self.root.buffers.push(json::Buffer {
                 byte_length: USize64::from(self.bin.len()),
@@ -426,10 +546,7 @@ impl Doc {
         }
         let bytes: Vec<u8> = match container {
             GltfContainer::Binary => {
-                let json = self
-                    .root
-                    .to_vec()
-                    .map_err(|e| io(std::io::Error::other(e)))?;
+                let json = self.root.to_vec().map_err(|e| io(e.to_string()))?;
                 let pad4 = |n: usize| n.div_ceil(4) * 4;
                 let total = 12
                     + 8
@@ -440,9 +557,9 @@ impl Doc {
                         8 + pad4(self.bin.len())
                     };
                 let length = u32::try_from(total).map_err(|_| {
-                    io(std::io::Error::other(format!(
+                    io(format!(
                         "{total} bytes: a .glb holds at most 4 GiB (write a smaller cut)"
-                    )))
+                    ))
                 })?;
                 let glb = ::gltf::binary::Glb {
                     header: ::gltf::binary::Header {
@@ -454,24 +571,16 @@ impl Doc {
                     bin: (!self.bin.is_empty()).then(|| Cow::Borrowed(&self.bin[..])),
                 };
                 let mut out = Vec::with_capacity(total);
-                glb.to_writer(&mut out)
-                    .map_err(|e| io(std::io::Error::other(e.to_string())))?;
+                glb.to_writer(&mut out).map_err(|e| io(e.to_string()))?;
                 out
             }
             GltfContainer::Embedded => {
-                let mut json = self
-                    .root
-                    .to_vec_pretty()
-                    .map_err(|e| io(std::io::Error::other(e)))?;
+                let mut json = self.root.to_vec_pretty().map_err(|e| io(e.to_string()))?;
                 json.push(b'\n');
                 json
             }
         };
-        let mut f = AtomicFile::create(path, 1 << 20)?;
-        f.write_all(&bytes)
-            .map_err(|e| FormatError::io(f.tmp_path(), e))?;
-        f.commit()?;
-        Ok(bytes.len() as u64)
+        Ok(bytes)
     }
 }
 
@@ -554,6 +663,11 @@ mod tests {
             let names: Vec<String> = prim.attributes().map(|(s, _)| s.to_string()).collect();
             assert_eq!(names, ["POSITION", "NORMAL", "COLOR_0"]);
             assert_eq!(prim.indices().unwrap().count(), 6);
+            // Four vertices: 16-bit indices.
+            assert_eq!(
+                prim.indices().unwrap().data_type(),
+                ::gltf::accessor::DataType::U16
+            );
             assert_eq!(g.blob.is_some(), c == GltfContainer::Binary);
         }
         let mut names: Vec<String> = std::fs::read_dir(dir.path())

@@ -17,4 +17,6 @@ pub mod extract;
 pub mod gltf_write;
 
 pub use extract::{decode_nodes, extract_nodes, extract_nodes_keeping, write_cut_ply, Extracted};
-pub use gltf_write::{write_cut_gltf, GltfContainer, GltfContent, GltfSummary};
+pub use gltf_write::{
+    encode_gltf, write_cut_gltf, GltfContainer, GltfContent, GltfFrame, GltfSummary,
+};

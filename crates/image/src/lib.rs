@@ -102,10 +102,38 @@ pub fn diff_stats(a: &Image, b: &Image, threshold: u8) -> Option<(usize, u8)> {
     Some((count, max))
 }
 
+/// Pixels of `img` that are not its corner pixel's colour (the background) by more than
+/// 24 in the sum of the three channel differences: the silhouette, a mask (rows top to
+/// bottom).
+pub fn coverage(img: &Image) -> Vec<bool> {
+    let bg = img.pixel(0, 0);
+    img.rgba
+        .chunks_exact(4)
+        .map(|p| (0..3).map(|c| u32::from(p[c].abs_diff(bg[c]))).sum::<u32>() > 24)
+        .collect()
+}
+
+/// Intersection over union of two masks of one size (0 when both are empty).
+pub fn iou(a: &[bool], b: &[bool]) -> f64 {
+    assert_eq!(a.len(), b.len(), "masks of different sizes");
+    let both = a.iter().zip(b).filter(|(x, y)| **x && **y).count();
+    let either = a.iter().zip(b).filter(|(x, y)| **x || **y).count();
+    both as f64 / either.max(1) as f64
+}
+
 /// Pinholes: pixels of colour `background` that are not connected (4-neighbourhood,
 /// through background pixels) to the image border. On a closed surface seen from
 /// outside with back faces culled, every such pixel is a hole in the surface.
 pub fn enclosed_background_pixels(img: &Image, background: [u8; 3]) -> usize {
+    enclosed_background_mask(img, background)
+        .iter()
+        .filter(|&&e| e)
+        .count()
+}
+
+/// Per pixel (rows top to bottom), whether it is one of the
+/// [`enclosed_background_pixels`]: where the holes are, to compare with another frame's.
+pub fn enclosed_background_mask(img: &Image, background: [u8; 3]) -> Vec<bool> {
     let (w, h) = (img.width as usize, img.height as usize);
     let is_bg = |i: usize| img.rgba[i * 4..i * 4 + 3] == background;
     let mut reached = vec![false; w * h];
@@ -137,5 +165,49 @@ pub fn enclosed_background_pixels(img: &Image, background: [u8; 3]) -> usize {
             stack.push(i + w);
         }
     }
-    (0..w * h).filter(|&i| is_bg(i) && !reached[i]).count()
+    (0..w * h).map(|i| is_bg(i) && !reached[i]).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 5x5 frame of background 0 with a 3x3 block of 200 in the middle, its centre
+    /// pixel background again (a pinhole).
+    fn frame() -> Image {
+        let mut rgba = vec![0u8; 5 * 5 * 4];
+        for y in 1..4 {
+            for x in 1..4 {
+                if (x, y) != (2, 2) {
+                    rgba[4 * (y * 5 + x)..4 * (y * 5 + x) + 3].copy_from_slice(&[200; 3]);
+                }
+            }
+        }
+        Image {
+            width: 5,
+            height: 5,
+            rgba,
+        }
+    }
+
+    #[test]
+    fn the_pinhole_is_enclosed_and_the_border_background_is_not() {
+        // Why: crack tests compare where holes are, so the mask must mark exactly the
+        // background pixels the surface encloses.
+        let m = enclosed_background_mask(&frame(), [0; 3]);
+        assert_eq!(m.iter().filter(|&&e| e).count(), 1);
+        assert!(m[2 * 5 + 2]);
+        assert_eq!(enclosed_background_pixels(&frame(), [0; 3]), 1);
+    }
+
+    #[test]
+    fn coverage_and_iou_of_shifted_silhouettes() {
+        let a = coverage(&frame());
+        assert_eq!(a.iter().filter(|&&c| c).count(), 8);
+        assert_eq!(iou(&a, &a), 1.0);
+        let shifted: Vec<bool> = (0..25).map(|i| i % 5 >= 1 && a[i - 1]).collect();
+        // 8 and 8 pixels, 4 in common: 4 / 12.
+        assert!((iou(&a, &shifted) - 4.0 / 12.0).abs() < 1e-12);
+        assert_eq!(iou(&[false; 4], &[false; 4]), 0.0);
+    }
 }

@@ -53,6 +53,39 @@ fn collinear(a: [u32; 3], b: [u32; 3], c: [u32; 3]) -> bool {
 /// Counts edge uses of the triangle list `indices` over `positions`, welding vertices
 /// with equal positions first. A trailing partial triangle is ignored.
 pub fn edge_report(indices: &[u32], positions: &[[u32; 3]]) -> EdgeReport {
+    edge_uses(indices, positions).0
+}
+
+/// The boundary edges (used by one triangle) of the mesh [`edge_report`] counts, each as
+/// its two grid positions (the smaller first), sorted: where a cut's holes are, to
+/// compare with the holes the full-resolution surface has of its own.
+pub fn boundary_edges(indices: &[u32], positions: &[[u32; 3]]) -> Vec<[[u32; 3]; 2]> {
+    let (_, uses) = edge_uses(indices, positions);
+    let mut edges: Vec<[[u32; 3]; 2]> = uses
+        .into_iter()
+        .filter(|&(_, n)| n == 1)
+        .map(|(key, _)| {
+            let (a, b) = (
+                positions[(key >> 32) as usize],
+                positions[key as u32 as usize],
+            );
+            if a < b {
+                [a, b]
+            } else {
+                [b, a]
+            }
+        })
+        .collect();
+    edges.sort_unstable();
+    edges
+}
+
+/// [`edge_report`] and the use count of every edge (keyed by its two canonical vertex
+/// ids, the first vertex at each position).
+fn edge_uses(
+    indices: &[u32],
+    positions: &[[u32; 3]],
+) -> (EdgeReport, HashMap<u64, u32, FxBuildHasher>) {
     // Canonical id per vertex: the first vertex with the same position.
     let mut by_position: HashMap<[u32; 3], u32, FxBuildHasher> =
         HashMap::with_capacity_and_hasher(positions.len(), FxBuildHasher);
@@ -101,7 +134,7 @@ pub fn edge_report(indices: &[u32], positions: &[[u32; 3]]) -> EdgeReport {
             _ => report.nonmanifold_edges += 1,
         }
     }
-    report
+    (report, uses)
 }
 
 #[cfg(test)]
@@ -110,6 +143,28 @@ mod tests {
 
     const TET: [[u32; 3]; 4] = [[0, 0, 0], [10, 0, 0], [0, 10, 0], [0, 0, 10]];
     const TET_INDICES: [u32; 12] = [0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3];
+
+    #[test]
+    fn boundary_edges_are_listed_by_position() {
+        // Why: a cut's holes are judged against the input's own (an open scan): the list
+        // must name positions, weld vertices that share one, and match the count.
+        let open = &TET_INDICES[..9]; // the tetrahedron without its face 1-2-3
+        let mut positions = TET.to_vec();
+        positions.push(TET[1]); // a second vertex at position 1, used instead of 1 below
+        let idx: Vec<u32> = open.iter().map(|&i| if i == 1 { 4 } else { i }).collect();
+        let e = boundary_edges(&idx, &positions);
+        let mut want = [[TET[1], TET[2]], [TET[1], TET[3]], [TET[2], TET[3]]].map(|[a, b]| {
+            if a < b {
+                [a, b]
+            } else {
+                [b, a]
+            }
+        });
+        want.sort_unstable();
+        assert_eq!(e, want);
+        assert_eq!(e.len() as u64, edge_report(&idx, &positions).boundary_edges);
+        assert!(boundary_edges(&TET_INDICES, &TET).is_empty());
+    }
 
     #[test]
     fn tetrahedron_is_closed() {

@@ -31,7 +31,7 @@ pub use camera::{
     clip_planes_along, Camera, CameraError, CameraErrorKind, Frustum, Orbit, ViewBasis,
     CAMERA_FIELDS,
 };
-pub use edges::{edge_report, EdgeReport};
+pub use edges::{boundary_edges, edge_report, EdgeReport};
 pub use merge::{merge_patches, CutMesh, PatchRef};
 pub use morph::{group_ratio, morph_ratio, refinement_ratio, DEFAULT_MORPH_WINDOW};
 pub use path::{CameraPath, PathError, PATH_FIELDS};

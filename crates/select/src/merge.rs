@@ -29,6 +29,19 @@ pub struct PatchRef<'a> {
     pub indices: &'a [u32],
 }
 
+impl<'a> From<&'a tessera_format::PatchData> for PatchRef<'a> {
+    /// A decoded patch's slices.
+    fn from(p: &'a tessera_format::PatchData) -> PatchRef<'a> {
+        PatchRef {
+            positions: &p.positions,
+            normals: &p.normals,
+            colors: &p.colors,
+            uvs: &p.uvs,
+            indices: &p.indices,
+        }
+    }
+}
+
 /// A cut as one indexed mesh. Attribute vectors are empty when the patches lack that
 /// attribute, else as long as `positions`.
 #[derive(Clone, Debug, Default, PartialEq)]

@@ -22,6 +22,9 @@ pub struct Shared {
     pub request_timeout: Duration,
     /// The browser viewer served at `/`, if any.
     pub web: Web,
+    /// 3D Tiles tilesets served at `/tiles/NAME/` (`tessera serve --tiles DIR`): each
+    /// directory's name and canonical path.
+    pub tiles: Vec<(String, std::path::PathBuf)>,
 }
 
 /// Where the static files served at `/` come from.
@@ -120,6 +123,8 @@ async fn dispatch(AxState(st): AxState<St>, req: Request) -> Response<Body> {
         Route::Catalogue
     } else if let Some(rest) = path.strip_prefix("/models/") {
         Route::Model(rest.to_string())
+    } else if let Some(rest) = path.strip_prefix("/tiles/") {
+        Route::Tiles(rest.to_string())
     } else if path == "/" {
         Route::Root
     } else if st.web.is_some() {
@@ -156,6 +161,7 @@ async fn dispatch(AxState(st): AxState<St>, req: Request) -> Response<Body> {
                  scripts/build-web)\n",
             ),
             Route::Static(p) => static_file(&st, &parts.headers, &p).await,
+            Route::Tiles(p) => tiles_file(&st, &parts.headers, &p).await,
             Route::Catalogue => catalogue(&st).await,
             Route::Model(raw) => model(&st, &parts.headers, &raw, head).await,
         }
@@ -176,6 +182,7 @@ enum Route {
     Catalogue,
     Model(String),
     Static(String),
+    Tiles(String),
 }
 
 /// The content type of a static file of the web directory, by extension.
@@ -191,6 +198,9 @@ fn content_type(name: &str) -> &'static str {
         Some("json") => "application/json",
         Some("css") => "text/css; charset=utf-8",
         Some("png") => "image/png",
+        Some("jpg") | Some("jpeg") => "image/jpeg",
+        Some("glb") => "model/gltf-binary",
+        Some("gltf") => "model/gltf+json",
         Some("svg") => "image/svg+xml",
         Some("txt") | Some("md") => "text/plain; charset=utf-8",
         _ => "application/octet-stream",
@@ -228,13 +238,9 @@ pub fn accepts_gzip(headers: &HeaderMap) -> bool {
 /// writes beside the files that compress; in a directory only when at least as new
 /// as the file) with `Content-Encoding: gzip`.
 async fn static_file(st: &St, headers: &HeaderMap, path: &str) -> Response<Body> {
-    let mut rel = std::path::PathBuf::new();
-    for seg in path.trim_start_matches('/').split('/') {
-        match decode_name(seg) {
-            Some(s) => rel.push(s),
-            None => return text(StatusCode::NOT_FOUND, "not found\n"),
-        }
-    }
+    let Some(rel) = relative_path(path) else {
+        return text(StatusCode::NOT_FOUND, "not found\n");
+    };
     let name = rel.to_string_lossy().into_owned();
     let gzip = accepts_gzip(headers);
     // (The body, whether it is the gzipped copy.)
@@ -251,43 +257,84 @@ async fn static_file(st: &St, headers: &HeaderMap, path: &str) -> Response<Body>
                 _ => (raw, false),
             })
         }
-        Web::Dir(root) => {
-            let root = root.clone();
-            tokio::task::spawn_blocking(move || {
-                let p = std::fs::canonicalize(root.join(&rel)).ok()?;
-                if !p.starts_with(&root) {
-                    return None;
-                }
-                // A FIFO or device in the directory is refused, never opened blocking.
-                let read = |p: &std::path::Path| -> Option<Vec<u8>> {
-                    let mut f = open_regular(p, true).ok()?;
-                    let mut b = Vec::new();
-                    std::io::Read::read_to_end(&mut f, &mut b).ok()?;
-                    Some(b)
-                };
-                if gzip {
-                    let mut gz = p.clone().into_os_string();
-                    gz.push(".gz");
-                    let gz = std::path::PathBuf::from(gz);
-                    let modified =
-                        |p: &std::path::Path| std::fs::metadata(p).and_then(|m| m.modified()).ok();
-                    let fresh = modified(&gz).zip(modified(&p)).is_some_and(|(g, f)| g >= f);
-                    let inside = std::fs::canonicalize(&gz)
-                        .ok()
-                        .filter(|g| g.starts_with(&root));
-                    if let (true, Some(gz)) = (fresh, inside) {
-                        if let Some(b) = read(&gz) {
-                            return Some((bytes::Bytes::from(b), true));
-                        }
-                    }
-                }
-                read(&p).map(|b| (bytes::Bytes::from(b), false))
-            })
-            .await
-            .ok()
-            .flatten()
-        }
+        Web::Dir(root) => dir_file(root.clone(), rel, gzip).await,
     };
+    file_response(&name, read)
+}
+
+/// A file of a served tileset: `/tiles/NAME/PATH` is `PATH` under the tileset
+/// directory named `NAME`, checked and resolved as the web directory's files are.
+async fn tiles_file(st: &St, headers: &HeaderMap, path: &str) -> Response<Body> {
+    let (tileset, rest) = path.split_once('/').unwrap_or((path, ""));
+    let root = decode_name(tileset).and_then(|n| {
+        st.tiles
+            .iter()
+            .find(|(name, _)| *name == n)
+            .map(|(_, r)| r.clone())
+    });
+    let (Some(root), Some(rel)) = (root, relative_path(rest)) else {
+        return text(StatusCode::NOT_FOUND, "not found\n");
+    };
+    let name = rel.to_string_lossy().into_owned();
+    let read = dir_file(root, rel, accepts_gzip(headers)).await;
+    file_response(&name, read)
+}
+
+/// Every segment of `path` percent-decoded and checked like a model name (no
+/// separators, control characters or leading dots).
+fn relative_path(path: &str) -> Option<std::path::PathBuf> {
+    let mut rel = std::path::PathBuf::new();
+    for seg in path.trim_start_matches('/').split('/') {
+        rel.push(decode_name(seg)?);
+    }
+    Some(rel)
+}
+
+/// The file `rel` under the directory `root` (canonical), resolved inside it only
+/// (symbolic links out of it are not followed), read whole; its gzipped copy instead
+/// (`NAME.gz`, when at least as new) to a client that accepts gzip.
+async fn dir_file(
+    root: std::path::PathBuf,
+    rel: std::path::PathBuf,
+    gzip: bool,
+) -> Option<(bytes::Bytes, bool)> {
+    tokio::task::spawn_blocking(move || {
+        let p = std::fs::canonicalize(root.join(&rel)).ok()?;
+        if !p.starts_with(&root) {
+            return None;
+        }
+        // A FIFO or device in the directory is refused, never opened blocking.
+        let read = |p: &std::path::Path| -> Option<Vec<u8>> {
+            let mut f = open_regular(p, true).ok()?;
+            let mut b = Vec::new();
+            std::io::Read::read_to_end(&mut f, &mut b).ok()?;
+            Some(b)
+        };
+        if gzip {
+            let mut gz = p.clone().into_os_string();
+            gz.push(".gz");
+            let gz = std::path::PathBuf::from(gz);
+            let modified =
+                |p: &std::path::Path| std::fs::metadata(p).and_then(|m| m.modified()).ok();
+            let fresh = modified(&gz).zip(modified(&p)).is_some_and(|(g, f)| g >= f);
+            let inside = std::fs::canonicalize(&gz)
+                .ok()
+                .filter(|g| g.starts_with(&root));
+            if let (true, Some(gz)) = (fresh, inside) {
+                if let Some(b) = read(&gz) {
+                    return Some((bytes::Bytes::from(b), true));
+                }
+            }
+        }
+        read(&p).map(|b| (bytes::Bytes::from(b), false))
+    })
+    .await
+    .ok()
+    .flatten()
+}
+
+/// The answer for a static file named `name` (its content type by extension), or 404.
+fn file_response(name: &str, read: Option<(bytes::Bytes, bool)>) -> Response<Body> {
     let Some((body, gzipped)) = read else {
         return text(StatusCode::NOT_FOUND, "not found\n");
     };
@@ -296,7 +343,7 @@ async fn static_file(st: &St, headers: &HeaderMap, path: &str) -> Response<Body>
     let h = r.headers_mut();
     h.insert(
         header::CONTENT_TYPE,
-        HeaderValue::from_static(content_type(&name)),
+        HeaderValue::from_static(content_type(name)),
     );
     if gzipped {
         h.insert(header::CONTENT_ENCODING, HeaderValue::from_static("gzip"));

@@ -52,6 +52,11 @@
 //!   [`EMBEDDED_WEB_GZIP`], or beside the file in the directory when at least as new;
 //!   the `.wasm` goes out at about a third of its size), `Vary: Accept-Encoding` on
 //!   every one. Models are never compressed (range requests address their bytes).
+//! - With [`ServeOptions::tiles`] (`tessera serve --tiles DIR`): a 3D Tiles tileset
+//!   directory (`tessera export-tiles`) at `/tiles/NAME/` (`NAME` the directory's
+//!   name): `tileset.json` as `application/json`, the tiles as `model/gltf-binary`,
+//!   resolved and checked like the web directory's files, with the same CORS. Models
+//!   are optional then.
 //! - CORS for embedding: `Access-Control-Allow-Origin: *`, methods `GET, HEAD, OPTIONS`,
 //!   the `Range`, `If-Range` and other conditional request headers allowed,
 //!   `Content-Range`, `Content-Length`, `ETag`, `Accept-Ranges`, `Last-Modified` exposed.
@@ -119,6 +124,10 @@ pub struct ServeOptions {
     /// ([`EMBEDDED_WEB`], when `scripts/build-web` ran before it was built) at `/`
     /// (true). Without either, `/` answers a line of text.
     pub embedded_web: bool,
+    /// 3D Tiles tileset directories (`tessera export-tiles` output, each holding a
+    /// `tileset.json`), served at `/tiles/NAME/` with `NAME` the directory's name
+    /// (`tessera serve --tiles DIR`).
+    pub tiles: Vec<PathBuf>,
 }
 
 impl Default for ServeOptions {
@@ -134,6 +143,7 @@ impl Default for ServeOptions {
             shutdown_grace: Duration::from_secs(10),
             web_dir: None,
             embedded_web: true,
+            tiles: Vec::new(),
         }
     }
 }
@@ -179,7 +189,13 @@ impl Server {
     /// address. Errors: a missing input, two models with one name, no valid model at all,
     /// the address in use.
     pub async fn bind(inputs: &[PathBuf], opts: ServeOptions) -> Result<Server, ServeError> {
+        let tiles = tilesets(&opts.tiles)?;
         let inputs = inputs.to_vec();
+        if inputs.is_empty() && tiles.is_empty() {
+            return Err(ServeError::NoModels {
+                skipped: Vec::new(),
+            });
+        }
         let models = tokio::task::spawn_blocking(move || models::Models::open(&inputs))
             .await
             .map_err(std::io::Error::other)?
@@ -235,6 +251,7 @@ impl Server {
                 models,
                 request_timeout: opts.request_timeout,
                 web,
+                tiles,
             }),
             opts,
         })
@@ -272,6 +289,42 @@ impl Server {
         rescan.abort();
         r.map_err(ServeError::Io)
     }
+}
+
+/// The tileset directories' URL names and canonical paths: each must be a directory
+/// holding `tileset.json`, and no two may share a name.
+fn tilesets(dirs: &[PathBuf]) -> Result<Vec<(String, PathBuf)>, ServeError> {
+    let mut out: Vec<(String, PathBuf)> = Vec::new();
+    for d in dirs {
+        let input = |msg: &str| ServeError::Input {
+            path: d.clone(),
+            source: std::io::Error::other(msg.to_string()),
+        };
+        let canon = std::fs::canonicalize(d).map_err(|source| ServeError::Input {
+            path: d.clone(),
+            source,
+        })?;
+        if !canon.join("tileset.json").is_file() {
+            return Err(input(
+                "no tileset.json in the --tiles directory (write one with tessera export-tiles)",
+            ));
+        }
+        let name = canon
+            .file_name()
+            .and_then(|n| n.to_str())
+            .filter(|n| http::decode_name(n).as_deref() == Some(*n))
+            .ok_or_else(|| input("the --tiles directory's name cannot be served in a URL"))?
+            .to_string();
+        if let Some((_, first)) = out.iter().find(|(n, _)| *n == name) {
+            return Err(ServeError::NameClash {
+                name,
+                first: first.clone(),
+                second: canon,
+            });
+        }
+        out.push((name, canon));
+    }
+    Ok(out)
 }
 
 /// Binds and serves `inputs` until Ctrl-C (or SIGTERM).

@@ -220,7 +220,7 @@ impl Models {
         for s in &scan.skipped {
             models.warn_once(s);
         }
-        if scan.set.is_empty() {
+        if scan.set.is_empty() && !inputs.is_empty() {
             return Err(StartError::NoModels {
                 skipped: scan.skipped,
             });

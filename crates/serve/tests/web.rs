@@ -283,3 +283,64 @@ fn the_embedded_viewer_is_the_built_one() {
     assert!(String::from_utf8_lossy(&body).contains("/api/models"));
     assert_eq!(get(&format!("{base}/tessera.js")).0, 404);
 }
+
+#[test]
+fn tileset_directories_are_served_under_tiles_with_their_content_types() {
+    // Why (issue 33): 3D Tiles clients fetch `tileset.json` and the `.glb` tiles it
+    // names from another origin, so each needs its content type and CORS; nothing
+    // outside the directory may be reachable, and a tileset alone (no model) serves.
+    let tmp = tempfile::tempdir().unwrap();
+    let tiles = tmp.path().join("bunny-tiles");
+    std::fs::create_dir_all(tiles.join("tiles")).unwrap();
+    std::fs::write(tiles.join("tileset.json"), r#"{"asset":{"version":"1.1"}}"#).unwrap();
+    std::fs::write(tiles.join("tiles").join("root.glb"), b"glTF\x02\0\0\0").unwrap();
+    std::fs::write(tmp.path().join("outside.txt"), "no").unwrap();
+    let opts = ServeOptions {
+        addr: "127.0.0.1:0".parse().unwrap(),
+        embedded_web: false,
+        tiles: vec![tiles.clone()],
+        ..ServeOptions::default()
+    };
+    let s = TestServer::start(&[], opts).expect("a tileset alone serves");
+    let base = s.url("");
+    let (st, ct, body) = get(&format!("{base}/tiles/bunny-tiles/tileset.json"));
+    assert_eq!((st, ct.as_deref()), (200, Some("application/json")));
+    assert!(body.starts_with(b"{\"asset\""));
+    let (st, ct, body) = get(&format!("{base}/tiles/bunny-tiles/tiles/root.glb"));
+    assert_eq!((st, ct.as_deref()), (200, Some("model/gltf-binary")));
+    assert_eq!(body, b"glTF\x02\0\0\0");
+    for bad in [
+        "/tiles/bunny-tiles/../outside.txt",
+        "/tiles/bunny-tiles/%2e%2e/outside.txt",
+        "/tiles/other/tileset.json",
+        "/tiles/bunny-tiles/",
+    ] {
+        assert_eq!(get(&format!("{base}{bad}")).0, 404, "{bad}");
+    }
+    let agent = ureq::Agent::new_with_config(
+        ureq::Agent::config_builder()
+            .http_status_as_error(false)
+            .build(),
+    );
+    let r = agent
+        .get(&format!("{base}/tiles/bunny-tiles/tileset.json"))
+        .header("origin", "http://elsewhere.example")
+        .call()
+        .unwrap();
+    assert_eq!(
+        r.headers()
+            .get("access-control-allow-origin")
+            .and_then(|v| v.to_str().ok()),
+        Some("*")
+    );
+    // A directory without tileset.json is refused at start.
+    let opts = ServeOptions {
+        addr: "127.0.0.1:0".parse().unwrap(),
+        tiles: vec![tmp.path().to_path_buf()],
+        ..ServeOptions::default()
+    };
+    match TestServer::start(&[], opts) {
+        Err(e) => assert!(e.to_string().contains("no tileset.json"), "{e}"),
+        Ok(_) => panic!("a directory without tileset.json was served"),
+    }
+}

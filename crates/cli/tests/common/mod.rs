@@ -70,16 +70,7 @@ pub fn decode_all(m: &Model) -> Vec<PatchData> {
 
 /// Merges the patches of `nodes` (from pre-decoded `patches`) into one mesh.
 pub fn merge(patches: &[PatchData], nodes: &[u32]) -> CutMesh {
-    merge_patches(nodes.iter().map(|&i| {
-        let p = &patches[i as usize];
-        PatchRef {
-            positions: &p.positions,
-            normals: &p.normals,
-            colors: &p.colors,
-            uvs: &p.uvs,
-            indices: &p.indices,
-        }
-    }))
+    merge_patches(nodes.iter().map(|&i| PatchRef::from(&patches[i as usize])))
 }
 
 /// Edge report of the merged cut.
@@ -446,4 +437,96 @@ impl Drop for Nginx {
         let _ = self.child.kill();
         let _ = self.child.wait();
     }
+}
+
+/// A child process killed and reaped on drop (a server a test started).
+pub struct Running(pub Child);
+
+impl Drop for Running {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// `tessera serve ARGS --addr 127.0.0.1:0`; the address from its first line (the rest
+/// of its output is drained on a thread).
+pub fn serve_tessera(args: &[&std::ffi::OsStr]) -> (Running, SocketAddr) {
+    use std::io::BufRead;
+    let mut child = Running(
+        tessera()
+            .arg("serve")
+            .args(args)
+            .args(["--addr", "127.0.0.1:0"])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    let mut out = std::io::BufReader::new(child.0.stdout.take().unwrap());
+    let mut line = String::new();
+    out.read_line(&mut line).unwrap();
+    let addr: SocketAddr = line
+        .trim()
+        .rsplit_once(" at http://")
+        .and_then(|(_, a)| a.trim_end_matches('/').parse().ok())
+        .unwrap_or_else(|| panic!("unexpected first line of tessera serve: {line}"));
+    std::thread::spawn(move || std::io::copy(&mut out, &mut std::io::sink()));
+    (child, addr)
+}
+
+/// Percent-encodes everything but unreserved bytes (a URL query value or segment).
+pub fn encode(s: &str) -> String {
+    s.bytes()
+        .map(|b| {
+            if b.is_ascii_alphanumeric() || b"-._~".contains(&b) {
+                (b as char).to_string()
+            } else {
+                format!("%{b:02X}")
+            }
+        })
+        .collect()
+}
+
+/// `tessera render --complete` of one camera (JSON, docs/camera.md) at `width` x
+/// `height` with `extra` arguments, frames into the directory `out`: the frame and its
+/// triangles.
+pub fn render_complete(
+    model: &Path,
+    camera: &str,
+    out: &Path,
+    (width, height): (u32, u32),
+    extra: &[&str],
+) -> (tessera_image::Image, u64) {
+    let path = out.with_extension("json");
+    let stats = out.with_extension("stats.json");
+    std::fs::write(
+        &path,
+        format!(r#"{{"frames": 1, "keyframes": [{camera}]}}"#),
+    )
+    .unwrap();
+    let mut argv: Vec<std::ffi::OsString> = vec![
+        "render".into(),
+        model.into(),
+        "--path".into(),
+        path.into(),
+        "--complete".into(),
+        "--out".into(),
+        out.into(),
+        "--width".into(),
+        width.to_string().into(),
+        "--height".into(),
+        height.to_string().into(),
+        "--stats".into(),
+        stats.clone().into(),
+    ];
+    argv.extend(extra.iter().map(|a| a.into()));
+    let argv: Vec<&std::ffi::OsStr> = argv.iter().map(|a| a.as_os_str()).collect();
+    let (code, _, stderr) = run_tessera(&argv);
+    assert_eq!(code, 0, "{stderr}");
+    let stats: serde_json::Value = serde_json::from_slice(&std::fs::read(&stats).unwrap()).unwrap();
+    (
+        tessera_image::Image::load_png(&out.join("frame_00000.png")).unwrap(),
+        stats["frames"][0]["triangles"].as_u64().unwrap(),
+    )
 }
