@@ -1,14 +1,17 @@
 //! Fixtures shared by the workspace's tests (a dev-dependency only): the build options
 //! that give small meshes deep hierarchies, a generated sphere built into a model in
 //! its own temporary directory, the real scans of `../shared/data` with a message that
-//! says where they come from, and a mesh read whole into memory. One copy instead of one
-//! per test file, so a fixture changed is changed everywhere.
+//! says where they come from, a mesh read whole into memory, and the committed fuzz
+//! inputs ([`fuzz`]). One copy instead of one per test file, so a fixture changed is
+//! changed everywhere.
 
 use std::path::{Path, PathBuf};
 
 use tessera_build::{BuildOptions, NoProgress};
 use tessera_gen::SphereOptions;
 use tessera_mesh::{MeshError, MeshHeader, MeshVisitor, Vertex};
+
+pub mod fuzz;
 
 /// Small nodes (400-triangle leaves, 200-triangle patches), so that meshes of a few
 /// tens of thousands of triangles give deep hierarchies; 256 MiB, 2 threads.
