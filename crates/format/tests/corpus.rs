@@ -13,7 +13,8 @@ use tessera_format::fuzzing::{
 use tessera_format::{
     header_crc32, replace_index, FormatError, Header, ModelIndex, NodeRecord, NO_NODE,
 };
-use tessera_testkit::fuzz::{fuzz_dir, fuzz_files, read_bytes, regressions, Regression, Rng};
+use tessera_testkit::fuzz::{fuzz_dir, fuzz_files, read_bytes, regressions, Regression};
+use tessera_testkit::Rng;
 
 /// Each regression file (target, name) and a piece of the error its fix gives.
 const REGRESSIONS: &[(&str, &str, &str)] = &[

@@ -7,7 +7,8 @@
 
 use tessera_mesh::fuzzing::{fuzz_gltf, fuzz_mtl, fuzz_obj, fuzz_ply, fuzz_stl, FUZZ_PATH};
 use tessera_mesh::{ImportReport, MeshError};
-use tessera_testkit::fuzz::{fuzz_files, read_bytes, regressions, Regression, Rng};
+use tessera_testkit::fuzz::{fuzz_files, read_bytes, regressions, Regression};
+use tessera_testkit::Rng;
 
 type Target = fn(&[u8]) -> Result<ImportReport, MeshError>;
 

@@ -56,21 +56,3 @@ pub fn regressions<'a>(target: &str, table: &[(&str, &str, &'a str)]) -> Vec<Reg
         })
         .collect()
 }
-
-/// xorshift64*: the deterministic mutations of the adversarial corpora (the same
-/// inputs on every run and machine).
-pub struct Rng(pub u64);
-
-impl Rng {
-    /// The next 64 random bits.
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
-    }
-    /// A number below `n` (0 for `n` = 0).
-    pub fn below(&mut self, n: usize) -> usize {
-        (self.next_u64() % n.max(1) as u64) as usize
-    }
-}

@@ -1,8 +1,8 @@
 //! Fixtures shared by the workspace's tests (a dev-dependency only): the build options
 //! that give small meshes deep hierarchies, a generated sphere built into a model in
 //! its own temporary directory, the real scans of `../shared/data` with a message that
-//! says where they come from, a mesh read whole into memory, and the committed fuzz
-//! inputs ([`fuzz`]). One copy instead of one per test file, so a fixture changed is
+//! says where they come from, a mesh read whole into memory, a seeded [`Rng`], and the
+//! committed fuzz inputs ([`fuzz`]). One copy instead of one per test file, so a fixture changed is
 //! changed everywhere.
 
 use std::path::{Path, PathBuf};
@@ -97,5 +97,31 @@ impl MeshVisitor for MeshCollector {
     fn triangle(&mut self, t: [u32; 3]) -> Result<(), MeshError> {
         self.triangles.push(t);
         Ok(())
+    }
+}
+
+/// xorshift64*: deterministic, dependency-free noise for test data and the mutations of
+/// the adversarial corpora (the same inputs on every run and machine).
+pub struct Rng(pub u64);
+
+impl Rng {
+    /// The next 64 random bits.
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
+    }
+    /// A number below `n` (0 for `n` = 0).
+    pub fn below(&mut self, n: usize) -> usize {
+        (self.next_u64() % n.max(1) as u64) as usize
+    }
+    /// Uniform in [0, 1).
+    pub fn unit(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
+    /// Uniform integer in [-r, r].
+    pub fn jitter(&mut self, r: i64) -> i64 {
+        (self.next_u64() % (2 * r as u64 + 1)) as i64 - r
     }
 }

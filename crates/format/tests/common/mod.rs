@@ -5,25 +5,7 @@ pub mod model;
 
 use tessera_format::PatchData;
 
-/// xorshift64*: deterministic, dependency-free noise.
-pub struct Rng(pub u64);
-
-impl Rng {
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
-    }
-    /// Uniform in [0, 1).
-    pub fn unit(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-    /// Uniform integer in [-r, r].
-    pub fn jitter(&mut self, r: i64) -> i64 {
-        (self.next_u64() % (2 * r as u64 + 1)) as i64 - r
-    }
-}
+pub use tessera_testkit::Rng;
 
 fn normalize(v: [f64; 3]) -> [f32; 3] {
     let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
