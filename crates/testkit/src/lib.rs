@@ -125,3 +125,13 @@ impl Rng {
         (self.next_u64() % (2 * r as u64 + 1)) as i64 - r
     }
 }
+
+/// FNV-1a (64-bit), to pin the exact bytes of a small file.
+pub fn fnv1a(bytes: &[u8]) -> u64 {
+    let mut h = 0xcbf2_9ce4_8422_2325u64;
+    for &b in bytes {
+        h ^= u64::from(b);
+        h = h.wrapping_mul(0x0100_0000_01b3);
+    }
+    h
+}

@@ -44,11 +44,8 @@ pub fn terrain_patch(cells: usize, spacing: f64, morph: bool, seed: u64) -> Patc
     let mut indices = Vec::with_capacity(cells * cells * 6);
     for j in 0..cells {
         for i in 0..cells {
-            let a = (j * side + i) as u32;
-            let b = a + 1;
-            let c = a + side as u32;
-            let d = c + 1;
-            indices.extend_from_slice(&[a, b, d, a, d, c]);
+            let cell = tessera_gen::grid_cell_triangles(side as u64, i as u64, j as u64);
+            indices.extend(cell.into_iter().flatten());
         }
     }
     let morph_targets: Vec<[u32; 3]> = if morph {
