@@ -7,6 +7,21 @@ use tessera_format::PatchData;
 
 pub use tessera_testkit::Rng;
 
+/// The triangles of `indices`, each rotated to start at its smallest vertex (meshopt's
+/// index codec may rotate a triangle's vertices).
+pub fn rotate_min_first(indices: &[u32]) -> Vec<[u32; 3]> {
+    indices
+        .chunks(3)
+        .map(|t| {
+            // Lexicographically smallest rotation: canonical even for degenerate triangles.
+            (0..3)
+                .map(|m| [t[m], t[(m + 1) % 3], t[(m + 2) % 3]])
+                .min()
+                .unwrap()
+        })
+        .collect()
+}
+
 fn normalize(v: [f64; 3]) -> [f32; 3] {
     let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
     [(v[0] / l) as f32, (v[1] / l) as f32, (v[2] / l) as f32]
