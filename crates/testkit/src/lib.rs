@@ -135,3 +135,35 @@ pub fn fnv1a(bytes: &[u8]) -> u64 {
     }
     h
 }
+
+/// SplitMix64: deterministic numbers in [0, 1) and directions, for the rays of the pick
+/// tests and benchmark.
+pub struct SplitMix64(pub u64);
+
+impl SplitMix64 {
+    /// Uniform in [0, 1).
+    pub fn next_f64(&mut self) -> f64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^= z >> 31;
+        (z >> 11) as f64 / (1u64 << 53) as f64
+    }
+    /// A uniformly distributed unit vector (rejection sampling in the cube).
+    pub fn unit_vector(&mut self) -> [f64; 3] {
+        loop {
+            let v = [self.next_f64(), self.next_f64(), self.next_f64()].map(|x| 2.0 * x - 1.0);
+            let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+            if l > 1e-3 && l <= 1.0 {
+                return v.map(|x| x / l);
+            }
+        }
+    }
+    /// A point uniformly distributed in the unit ball.
+    pub fn in_ball(&mut self) -> [f64; 3] {
+        let u = self.unit_vector();
+        let s = self.next_f64().cbrt();
+        u.map(|x| x * s)
+    }
+}
