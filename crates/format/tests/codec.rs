@@ -4,7 +4,7 @@ mod common;
 
 use std::time::Instant;
 
-use common::{quant_min, terrain_patch};
+use common::{quant_min, rotate_min_first, terrain_patch};
 use tessera_format::*;
 
 /// The node-record facts a patch is decoded against.
@@ -58,19 +58,6 @@ fn bytes_per_triangle_on_terrain_patch() {
 }
 
 use proptest::prelude::*;
-
-fn rotate_min_first(indices: &[u32]) -> Vec<[u32; 3]> {
-    indices
-        .chunks(3)
-        .map(|t| {
-            // Lexicographically smallest rotation: canonical even for degenerate triangles.
-            (0..3)
-                .map(|m| [t[m], t[(m + 1) % 3], t[(m + 2) % 3]])
-                .min()
-                .unwrap()
-        })
-        .collect()
-}
 
 prop_compose! {
     fn arb_patch()(
@@ -689,9 +676,14 @@ proptest! {
     }
 }
 
-/// A textured patch: a strip whose vertices sample two charts of a 24x16 texture.
+/// What a textured patch is stored with: normals, UVs and its texture.
+const TEXTURED: u32 = ATTR_NORMALS | ATTR_UVS | ATTR_TEXTURE;
+
+/// A textured patch: a strip of 30 vertices (normals up) that sample two charts of a
+/// 24x16 texture.
 fn textured_patch(codec: TextureCodec) -> PatchData {
     let mut p = strip_patch(30);
+    p.normals = vec![[0.0, 0.0, 1.0]; 30];
     p.uvs = (0..30).map(|i| [i as f32 / 29.0, (i % 2) as f32]).collect();
     p.charts = vec![
         TextureChart {
@@ -713,18 +705,24 @@ fn textured_patch(codec: TextureCodec) -> PatchData {
     p
 }
 
+/// A [`textured_patch`] (its texture as given) encoded with [`TEXTURED`], and the
+/// node-record shape it decodes against.
+fn encode_textured(p: &PatchData) -> (Vec<u8>, PatchShape) {
+    let qmin = quant_min(p);
+    let bytes = encode_patch(p, TEXTURED, qmin);
+    let sh = PatchShape {
+        texture_size: [24, 16],
+        ..shape(qmin, 30, p.triangle_count() as u32)
+    };
+    (bytes, sh)
+}
+
 #[test]
 fn textured_patches_round_trip_and_damage_is_an_error() {
-    let attrs = ATTR_NORMALS | ATTR_UVS | ATTR_TEXTURE;
+    let attrs = TEXTURED;
     for codec in [TextureCodec::Png, TextureCodec::Jpeg] {
-        let mut p = textured_patch(codec);
-        p.normals = vec![[0.0, 0.0, 1.0]; 30];
-        let qmin = quant_min(&p);
-        let bytes = encode_patch(&p, attrs, qmin);
-        let sh = PatchShape {
-            texture_size: [24, 16],
-            ..shape(qmin, 30, p.triangle_count() as u32)
-        };
+        let p = textured_patch(codec);
+        let (bytes, sh) = encode_textured(&p);
         let back = decode_patch(&bytes, attrs, sh).unwrap();
         assert_eq!(back.charts, p.charts);
         assert_eq!(back.chart_ids, p.chart_ids);
@@ -795,17 +793,11 @@ fn bc7_levels(w: u32, h: u32) -> Vec<Vec<u8>> {
 
 #[test]
 fn bc7_patch_textures_round_trip_as_blocks_and_decode_to_texels() {
-    let attrs = ATTR_NORMALS | ATTR_UVS | ATTR_TEXTURE;
+    let attrs = TEXTURED;
     let mut p = textured_patch(TextureCodec::Png);
-    p.normals = vec![[0.0, 0.0, 1.0]; 30];
     let levels = bc7_levels(24, 16);
     p.texture = Some(PatchTexture::from_bc7(24, 16, levels.clone()).unwrap());
-    let qmin = quant_min(&p);
-    let bytes = encode_patch(&p, attrs, qmin);
-    let sh = PatchShape {
-        texture_size: [24, 16],
-        ..shape(qmin, 30, p.triangle_count() as u32)
-    };
+    let (bytes, sh) = encode_textured(&p);
     // Decoding keeps the blocks as stored: what the GPU takes.
     let back = decode_patch(&bytes, attrs, sh).unwrap();
     let t = back.texture.clone().unwrap();

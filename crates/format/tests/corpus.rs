@@ -6,8 +6,6 @@
 //! corrupted models: truncations, byte flips (caught by the CRCs), byte flips with the
 //! CRCs recomputed, header fields and node records changed behind valid CRCs.
 
-use std::path::{Path, PathBuf};
-
 use bytemuck::Zeroable;
 use tessera_format::fuzzing::{
     check_model, check_paged, fix_checksums, fuzz_model, fuzz_paged_index,
@@ -15,6 +13,8 @@ use tessera_format::fuzzing::{
 use tessera_format::{
     header_crc32, replace_index, FormatError, Header, ModelIndex, NodeRecord, NO_NODE,
 };
+use tessera_testkit::fuzz::{fuzz_dir, fuzz_files, read_bytes, regressions, Regression};
+use tessera_testkit::Rng;
 
 /// Each regression file (target, name) and a piece of the error its fix gives.
 const REGRESSIONS: &[(&str, &str, &str)] = &[
@@ -27,30 +27,13 @@ const REGRESSIONS: &[(&str, &str, &str)] = &[
     ),
 ];
 
-fn fuzz_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz")
-}
-
-fn files(kind: &str, target: &str) -> Vec<PathBuf> {
-    let mut v: Vec<PathBuf> = std::fs::read_dir(fuzz_dir().join(kind).join(target))
-        .map(|d| d.filter_map(|e| e.ok().map(|e| e.path())).collect())
-        .unwrap_or_default();
-    v.retain(|p| p.is_file());
-    v.sort();
-    v
-}
-
-fn read(p: &Path) -> Vec<u8> {
-    std::fs::read(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
-}
-
 fn seeds() -> Vec<(String, Vec<u8>)> {
-    let v: Vec<_> = files("corpus", "model")
+    let v: Vec<_> = fuzz_files("corpus", "model")
         .iter()
         .map(|p| {
             (
                 p.file_name().unwrap().to_string_lossy().into_owned(),
-                read(p),
+                read_bytes(p),
             )
         })
         .collect();
@@ -81,12 +64,12 @@ fn seed_models_are_valid() {
 #[test]
 fn corpora_replay_without_panics() {
     for target in ["model", "paged_index"] {
-        assert!(files("corpus", target).len() >= 3);
-        for f in files("corpus", target)
+        assert!(fuzz_files("corpus", target).len() >= 3);
+        for f in fuzz_files("corpus", target)
             .iter()
-            .chain(&files("regressions", target))
+            .chain(&fuzz_files("regressions", target))
         {
-            let b = read(f);
+            let b = read_bytes(f);
             match target {
                 "model" => {
                     let (raw, fixed) = fuzz_model(&b);
@@ -125,15 +108,8 @@ fn first_complaint(b: &[u8]) -> Option<String> {
 #[test]
 fn regressions_give_their_errors() {
     for target in ["model", "paged_index"] {
-        for f in files("regressions", target) {
-            let name = f.file_name().unwrap().to_string_lossy().into_owned();
-            let Some(&(_, _, want)) = REGRESSIONS
-                .iter()
-                .find(|(t, n, _)| *t == target && *n == name)
-            else {
-                panic!("fuzz/regressions/{target}/{name} has no expected error in REGRESSIONS");
-            };
-            let b = read(&f);
+        for Regression { name, bytes, want } in regressions(target, REGRESSIONS) {
+            let b = bytes;
             // Every complaint, on the bytes and on their checksum-fixed copy.
             let got: Vec<String> = match target {
                 "model" => {
@@ -167,7 +143,7 @@ fn regressions_give_their_errors() {
 /// pages read before it showed (fuzz/regressions/paged_index/levels_out_of_order.tsr).
 #[test]
 fn paged_read_refuses_levels_out_of_order() {
-    let b = read(&fuzz_dir().join("corpus/model/s300p1.tsr"));
+    let b = read_bytes(&fuzz_dir().join("corpus/model/s300p1.tsr"));
     let bad = with_node(&b, |v| {
         let i = v.len() - 1;
         v[7].level = 9;
@@ -188,19 +164,6 @@ fn paged_read_refuses_levels_out_of_order() {
         e.to_string().contains("the table is not sorted by level"),
         "{e}"
     );
-}
-
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
-    }
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n.max(1) as u64) as usize
-    }
 }
 
 #[test]
@@ -241,7 +204,7 @@ fn models_corrupted_behind_valid_checksums_do_not_panic() {
             let mut c = b.clone();
             for _ in 0..1 + rng.below(3) {
                 let at = rng.below(c.len());
-                c[at] = rng.next() as u8;
+                c[at] = rng.next_u64() as u8;
             }
             let fixed = fix_checksums(&c);
             count += 1;

@@ -3,21 +3,9 @@
 mod common;
 
 use common::model::{list, Fixture};
+use common::rotate_min_first;
 use proptest::prelude::*;
 use tessera_format::*;
-
-fn rotate_min_first(indices: &[u32]) -> Vec<[u32; 3]> {
-    indices
-        .chunks(3)
-        .map(|t| {
-            // Lexicographically smallest rotation: canonical even for degenerate triangles.
-            (0..3)
-                .map(|m| [t[m], t[(m + 1) % 3], t[(m + 2) % 3]])
-                .min()
-                .unwrap()
-        })
-        .collect()
-}
 
 fn assert_patch_eq(got: &PatchData, want: &PatchData) {
     assert_eq!(got.positions, want.positions);

@@ -35,7 +35,7 @@ pub use textured::{
 };
 pub use tile::{write_tiled, TileOptions};
 
-use tessera_mesh::MeshError;
+use tessera_mesh::{Attributes, MeshError, PlyWriterOptions};
 pub use tessera_mesh::{NoProgress, Progress};
 
 /// What a generator wrote.
@@ -114,6 +114,57 @@ impl<'a> Ticker<'a> {
         self.progress.advance(std::mem::take(&mut self.pending));
         self.progress.finish_stage();
     }
+}
+
+/// The writer options of an untextured PLY: positions, colours when `colors`, no normals
+/// or UVs.
+pub(crate) fn plain_ply(
+    colors: bool,
+    vertex_count: u64,
+    face_count: u64,
+    comment: String,
+) -> PlyWriterOptions {
+    PlyWriterOptions {
+        attributes: Attributes {
+            normals: false,
+            colors,
+            uvs: false,
+            textures: false,
+        },
+        vertex_count,
+        face_count,
+        comments: vec![comment],
+    }
+}
+
+/// The two triangles of cell `(i, j)` of a grid with rows of `m` vertices (vertex `j m +
+/// i`), counter-clockwise seen from +z: `[v00, v10, v11]` and `[v00, v11, v01]`, where
+/// `v10` is the next vertex in the row and `v01` the one in the next row.
+pub fn grid_cell_triangles(m: u64, i: u64, j: u64) -> [[u32; 3]; 2] {
+    let v00 = (j * m + i) as u32;
+    let v10 = v00 + 1;
+    let v01 = v00 + m as u32;
+    let v11 = v01 + 1;
+    [[v00, v10, v11], [v00, v11, v01]]
+}
+
+/// [`stream_vertices`] over a grid with rows of `m` vertices `scale` apart: `f` makes the
+/// vertex at `(x, y)` = `(idx % m, idx / m) * scale` (row `j` holds vertices `j m .. j m +
+/// m`).
+pub(crate) fn stream_grid<F, S>(
+    count: u64,
+    m: u64,
+    scale: f64,
+    ticker: &mut Ticker<'_>,
+    f: F,
+    sink: S,
+) -> Result<(), GenError>
+where
+    F: Fn(f64, f64) -> tessera_mesh::Vertex + Sync,
+    S: FnMut(&tessera_mesh::Vertex) -> Result<(), MeshError> + Send,
+{
+    let point = |idx: u64| f((idx % m) as f64 * scale, (idx / m) as f64 * scale);
+    stream_vertices(count, ticker, point, sink)
 }
 
 /// Compute vertices `0..count` with `f` in parallel blocks and hand them to `sink` in order.

@@ -72,30 +72,32 @@ fn lerp(a: f64, b: f64, t: f64) -> f64 {
     a + (b - a) * t
 }
 
+/// One axis of a lattice cell around coordinate `p`: the hashes of the lattice planes
+/// below and above it (`k`: the axis's multiplier, XORed into a corner's key) and the
+/// smoothstep weight between them.
+#[inline]
+fn axis(p: f64, k: u64) -> (u64, u64, f64) {
+    let (i, f) = split(p);
+    let h0 = (i as u64).wrapping_mul(k);
+    let h1 = (i as u64).wrapping_add(1).wrapping_mul(k);
+    (h0, h1, smoothstep(f))
+}
+
 /// 3D value noise in `[-1, 1]`: random values on the integer lattice, interpolated with
 /// smoothstep weights (C1-continuous).
 #[inline]
 pub(crate) fn value3(key: u64, p: [f64; 3]) -> f64 {
-    let (ix, fx) = split(p[0]);
-    let (iy, fy) = split(p[1]);
-    let (iz, fz) = split(p[2]);
-    let tx = smoothstep(fx);
-    let ty = smoothstep(fy);
-    let tz = smoothstep(fz);
-    let hx0 = key ^ (ix as u64).wrapping_mul(KX);
-    let hx1 = key ^ (ix as u64).wrapping_add(1).wrapping_mul(KX);
-    let hy0 = (iy as u64).wrapping_mul(KY);
-    let hy1 = (iy as u64).wrapping_add(1).wrapping_mul(KY);
-    let hz0 = (iz as u64).wrapping_mul(KZ);
-    let hz1 = (iz as u64).wrapping_add(1).wrapping_mul(KZ);
-    let c000 = lattice_value(hx0 ^ hy0 ^ hz0);
-    let c100 = lattice_value(hx1 ^ hy0 ^ hz0);
-    let c010 = lattice_value(hx0 ^ hy1 ^ hz0);
-    let c110 = lattice_value(hx1 ^ hy1 ^ hz0);
-    let c001 = lattice_value(hx0 ^ hy0 ^ hz1);
-    let c101 = lattice_value(hx1 ^ hy0 ^ hz1);
-    let c011 = lattice_value(hx0 ^ hy1 ^ hz1);
-    let c111 = lattice_value(hx1 ^ hy1 ^ hz1);
+    let (hx0, hx1, tx) = axis(p[0], KX);
+    let (hy0, hy1, ty) = axis(p[1], KY);
+    let (hz0, hz1, tz) = axis(p[2], KZ);
+    let c000 = lattice_value(key ^ hx0 ^ hy0 ^ hz0);
+    let c100 = lattice_value(key ^ hx1 ^ hy0 ^ hz0);
+    let c010 = lattice_value(key ^ hx0 ^ hy1 ^ hz0);
+    let c110 = lattice_value(key ^ hx1 ^ hy1 ^ hz0);
+    let c001 = lattice_value(key ^ hx0 ^ hy0 ^ hz1);
+    let c101 = lattice_value(key ^ hx1 ^ hy0 ^ hz1);
+    let c011 = lattice_value(key ^ hx0 ^ hy1 ^ hz1);
+    let c111 = lattice_value(key ^ hx1 ^ hy1 ^ hz1);
     let x00 = lerp(c000, c100, tx);
     let x10 = lerp(c010, c110, tx);
     let x01 = lerp(c001, c101, tx);
@@ -107,18 +109,12 @@ pub(crate) fn value3(key: u64, p: [f64; 3]) -> f64 {
 /// corners instead of eight: half the cost, for per-texel work).
 #[inline]
 pub(crate) fn value2(key: u64, p: [f64; 2]) -> f64 {
-    let (ix, fx) = split(p[0]);
-    let (iy, fy) = split(p[1]);
-    let tx = smoothstep(fx);
-    let ty = smoothstep(fy);
-    let hx0 = key ^ (ix as u64).wrapping_mul(KX);
-    let hx1 = key ^ (ix as u64).wrapping_add(1).wrapping_mul(KX);
-    let hy0 = (iy as u64).wrapping_mul(KY);
-    let hy1 = (iy as u64).wrapping_add(1).wrapping_mul(KY);
-    let c00 = lattice_value(hx0 ^ hy0);
-    let c10 = lattice_value(hx1 ^ hy0);
-    let c01 = lattice_value(hx0 ^ hy1);
-    let c11 = lattice_value(hx1 ^ hy1);
+    let (hx0, hx1, tx) = axis(p[0], KX);
+    let (hy0, hy1, ty) = axis(p[1], KY);
+    let c00 = lattice_value(key ^ hx0 ^ hy0);
+    let c10 = lattice_value(key ^ hx1 ^ hy0);
+    let c01 = lattice_value(key ^ hx0 ^ hy1);
+    let c11 = lattice_value(key ^ hx1 ^ hy1);
     lerp(lerp(c00, c10, tx), lerp(c01, c11, tx), ty)
 }
 
@@ -169,50 +165,43 @@ impl Fbm {
         }
     }
 
+    /// The sum over the octaves of `each(octave, q)`, `q` being `p` (2 or 3 coordinates)
+    /// at the octave's frequency and offset, times the normalisation: the one loop of
+    /// every sampler, so they all see the same lattice.
+    #[inline]
+    fn octaves_at<const N: usize>(
+        &self,
+        p: [f64; N],
+        each: impl Fn(&Octave, [f64; N]) -> f64,
+    ) -> f64 {
+        let mut sum = 0.0;
+        for o in &self.octaves {
+            let q = std::array::from_fn(|i| p[i] * o.frequency + o.offset[i]);
+            sum += each(o, q);
+        }
+        sum * self.norm
+    }
+
     /// The noise value in `[-1, 1]` at `p`.
     #[inline]
     pub(crate) fn sample(&self, p: [f64; 3]) -> f64 {
-        let mut sum = 0.0;
-        for o in &self.octaves {
-            let q = [
-                p[0] * o.frequency + o.offset[0],
-                p[1] * o.frequency + o.offset[1],
-                p[2] * o.frequency + o.offset[2],
-            ];
-            sum += o.amplitude * value3(o.key, q);
-        }
-        sum * self.norm
+        self.octaves_at(p, |o, q| o.amplitude * value3(o.key, q))
     }
 
     /// The 2D noise value in `[-1, 1]` at `p` ([`value2`] octaves).
     #[inline]
     pub(crate) fn sample2(&self, p: [f64; 2]) -> f64 {
-        let mut sum = 0.0;
-        for o in &self.octaves {
-            let q = [
-                p[0] * o.frequency + o.offset[0],
-                p[1] * o.frequency + o.offset[1],
-            ];
-            sum += o.amplitude * value2(o.key, q);
-        }
-        sum * self.norm
+        self.octaves_at(p, |o, q| o.amplitude * value2(o.key, q))
     }
 
     /// Ridged variant in `[0, 1]`: each octave contributes `(1 - |n|)^2`, sharp crests where
     /// the noise crosses zero.
     #[inline]
     pub(crate) fn ridged(&self, p: [f64; 3]) -> f64 {
-        let mut sum = 0.0;
-        for o in &self.octaves {
-            let q = [
-                p[0] * o.frequency + o.offset[0],
-                p[1] * o.frequency + o.offset[1],
-                p[2] * o.frequency + o.offset[2],
-            ];
+        self.octaves_at(p, |o, q| {
             let r = 1.0 - value3(o.key, q).abs();
-            sum += o.amplitude * r * r;
-        }
-        sum * self.norm
+            o.amplitude * r * r
+        })
     }
 }
 

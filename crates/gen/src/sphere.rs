@@ -10,10 +10,10 @@
 
 use std::path::Path;
 
-use tessera_mesh::{Attributes, PlyWriter, PlyWriterOptions, Vertex};
+use tessera_mesh::{PlyWriter, Vertex};
 
 use crate::noise::{ramp, Fbm};
-use crate::{stream_vertices, GenError, GenReport, Progress, Ticker};
+use crate::{plain_ply, stream_vertices, GenError, GenReport, Progress, Ticker};
 
 /// Options of [`write_sphere`].
 #[derive(Clone, Debug, PartialEq)]
@@ -91,20 +91,11 @@ pub fn write_sphere(
     let face_count = 12 * n * n;
 
     let surface = SphereSurface::new(n, opts.seed, f64::from(opts.noise));
-    let writer_opts = PlyWriterOptions {
-        attributes: Attributes {
-            normals: false,
-            colors: opts.colors,
-            uvs: false,
-            textures: false,
-        },
-        vertex_count,
-        face_count,
-        comments: vec![format!(
-            "tessera-gen sphere n={n} seed={} noise={} colors={}",
-            opts.seed, opts.noise, opts.colors
-        )],
-    };
+    let comment = format!(
+        "tessera-gen sphere n={n} seed={} noise={} colors={}",
+        opts.seed, opts.noise, opts.colors
+    );
+    let writer_opts = plain_ply(opts.colors, vertex_count, face_count, comment);
     let mut w = PlyWriter::create(path, &writer_opts)?;
     let mut ticker = Ticker::new(progress, vertex_count, face_count);
 

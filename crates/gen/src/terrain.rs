@@ -2,10 +2,10 @@
 
 use std::path::Path;
 
-use tessera_mesh::{Attributes, PlyWriter, PlyWriterOptions, Vertex};
+use tessera_mesh::{PlyWriter, Vertex};
 
 use crate::noise::{ramp, Fbm};
-use crate::{stream_vertices, GenError, GenReport, Progress, Ticker};
+use crate::{grid_cell_triangles, plain_ply, stream_grid, GenError, GenReport, Progress, Ticker};
 
 /// Amplitude of the fBm part of the height.
 const FBM_AMPLITUDE: f64 = 0.1;
@@ -83,31 +83,21 @@ pub fn write_terrain(
 
     let height = Height::new(opts.seed, cells);
 
-    let writer_opts = PlyWriterOptions {
-        attributes: Attributes {
-            normals: false,
-            colors: opts.colors,
-            uvs: false,
-            textures: false,
-        },
-        vertex_count,
-        face_count,
-        comments: vec![format!(
-            "tessera-gen terrain m={m} seed={} colors={}",
-            opts.seed, opts.colors
-        )],
-    };
+    let comment = format!(
+        "tessera-gen terrain m={m} seed={} colors={}",
+        opts.seed, opts.colors
+    );
+    let writer_opts = plain_ply(opts.colors, vertex_count, face_count, comment);
     let mut w = PlyWriter::create(path, &writer_opts)?;
     let mut ticker = Ticker::new(progress, vertex_count, face_count);
 
     let colors = opts.colors;
-    let scale = 1.0 / cells as f64;
-    stream_vertices(
+    stream_grid(
         vertex_count,
+        m,
+        1.0 / cells as f64,
         &mut ticker,
-        |idx| {
-            let x = (idx % m) as f64 * scale;
-            let y = (idx / m) as f64 * scale;
+        |x, y| {
             let z = height.at(x, y);
             let mut v = Vertex {
                 position: [x as f32, y as f32, z as f32],
@@ -123,12 +113,9 @@ pub fn write_terrain(
 
     for j in 0..cells {
         for i in 0..cells {
-            let v00 = (j * m + i) as u32;
-            let v10 = v00 + 1;
-            let v01 = v00 + m as u32;
-            let v11 = v01 + 1;
-            w.write_triangle([v00, v10, v11])?;
-            w.write_triangle([v00, v11, v01])?;
+            for t in grid_cell_triangles(m, i, j) {
+                w.write_triangle(t)?;
+            }
         }
         ticker.add_triangles(2 * cells);
     }

@@ -40,7 +40,7 @@ use tessera_mesh::{MeshError, Vertex};
 
 use crate::noise::{derive_key, mix64, split, Fbm};
 use crate::terrain::Height;
-use crate::{stream_vertices, GenError, GenReport, Progress, Ticker};
+use crate::{stream_grid, GenError, GenReport, Progress, Ticker};
 
 /// How the tile images are encoded.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -300,17 +300,14 @@ pub fn write_textured_terrain(
     )
     .map_err(wr)?;
     let mut ticker = Ticker::new(progress, positions, faces);
-    let scale = 1.0 / cells as f64;
-    stream_vertices(
+    stream_grid(
         positions,
+        nx,
+        1.0 / cells as f64,
         &mut ticker,
-        |idx| {
-            let x = (idx % nx) as f64 * scale;
-            let y = (idx / nx) as f64 * scale;
-            Vertex {
-                position: [x as f32, y as f32, height.at(x, y) as f32],
-                ..Vertex::default()
-            }
+        |x, y| Vertex {
+            position: [x as f32, y as f32, height.at(x, y) as f32],
+            ..Vertex::default()
         },
         |v| {
             let [x, y, z] = v.position;

@@ -4,34 +4,11 @@ use std::collections::{HashMap, HashSet};
 use std::path::Path;
 
 use tessera_gen::*;
-use tessera_mesh::{
-    read_mesh, Attributes, MeshError, MeshHeader, MeshVisitor, PlyWriter, PlyWriterOptions, Vertex,
-};
+use tessera_mesh::{read_mesh, Attributes, PlyWriter, PlyWriterOptions, Vertex};
+use tessera_testkit::{fnv1a, MeshCollector};
 
-#[derive(Default)]
-struct Mesh {
-    header: MeshHeader,
-    vertices: Vec<Vertex>,
-    triangles: Vec<[u32; 3]>,
-}
-
-impl MeshVisitor for Mesh {
-    fn header(&mut self, header: &MeshHeader) -> Result<(), MeshError> {
-        self.header = header.clone();
-        Ok(())
-    }
-    fn vertex(&mut self, vertex: &Vertex) -> Result<(), MeshError> {
-        self.vertices.push(*vertex);
-        Ok(())
-    }
-    fn triangle(&mut self, indices: [u32; 3]) -> Result<(), MeshError> {
-        self.triangles.push(indices);
-        Ok(())
-    }
-}
-
-fn load(path: &Path) -> Mesh {
-    let mut m = Mesh::default();
+fn load(path: &Path) -> MeshCollector {
+    let mut m = MeshCollector::default();
     let report = read_mesh(path, &mut m).expect("read back");
     assert_eq!(report.degenerate_faces_skipped, 0);
     assert_eq!(report.vertices, m.vertices.len() as u64);
@@ -55,18 +32,18 @@ fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
-fn pos(m: &Mesh, i: u32) -> [f64; 3] {
+fn pos(m: &MeshCollector, i: u32) -> [f64; 3] {
     m.vertices[i as usize].position.map(f64::from)
 }
 
 /// Normal (not unit) of triangle `t`.
-fn normal(m: &Mesh, t: [u32; 3]) -> [f64; 3] {
+fn normal(m: &MeshCollector, t: [u32; 3]) -> [f64; 3] {
     let (a, b, c) = (pos(m, t[0]), pos(m, t[1]), pos(m, t[2]));
     cross(sub(b, a), sub(c, a))
 }
 
 /// Directed edge -> number of uses.
-fn directed_edges(m: &Mesh) -> HashMap<(u32, u32), u32> {
+fn directed_edges(m: &MeshCollector) -> HashMap<(u32, u32), u32> {
     let mut edges = HashMap::new();
     for t in &m.triangles {
         for k in 0..3 {
@@ -76,7 +53,7 @@ fn directed_edges(m: &Mesh) -> HashMap<(u32, u32), u32> {
     edges
 }
 
-fn assert_unique_positions(m: &Mesh) {
+fn assert_unique_positions(m: &MeshCollector) {
     let set: HashSet<[u32; 3]> = m
         .vertices
         .iter()
@@ -85,7 +62,7 @@ fn assert_unique_positions(m: &Mesh) {
     assert_eq!(set.len(), m.vertices.len(), "duplicate vertex positions");
 }
 
-fn assert_non_degenerate(m: &Mesh) {
+fn assert_non_degenerate(m: &MeshCollector) {
     for t in &m.triangles {
         assert!(
             t[0] != t[1] && t[1] != t[2] && t[0] != t[2],
@@ -97,7 +74,7 @@ fn assert_non_degenerate(m: &Mesh) {
 }
 
 /// Every check of the sphere contract.
-fn check_sphere(m: &Mesh, noise: f32) {
+fn check_sphere(m: &MeshCollector, noise: f32) {
     let v = m.vertices.len() as i64;
     let f = m.triangles.len() as i64;
     let edges = directed_edges(m);
@@ -246,16 +223,6 @@ fn sphere_colors() {
     assert!(distinct.len() > 50, "only {} colours", distinct.len());
     assert!(m.vertices.iter().all(|v| v.color[3] == 255));
     check_sphere(&m, 0.05);
-}
-
-/// FNV-1a, to pin the exact bytes of a small file.
-fn fnv1a(bytes: &[u8]) -> u64 {
-    let mut h = 0xcbf2_9ce4_8422_2325u64;
-    for &b in bytes {
-        h ^= u64::from(b);
-        h = h.wrapping_mul(0x0100_0000_01b3);
-    }
-    h
 }
 
 #[test]

@@ -6,6 +6,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 
 use tessera_gen::*;
+use tessera_testkit::fnv1a;
 
 fn opts(columns: u32, rows: u32, size: u32, format: ImageFormat) -> TexturedOptions {
     TexturedOptions {
@@ -30,15 +31,6 @@ fn files(dir: &Path) -> BTreeMap<String, Vec<u8>> {
             )
         })
         .collect()
-}
-
-fn fnv1a(bytes: &[u8]) -> u64 {
-    let mut h = 0xcbf2_9ce4_8422_2325u64;
-    for &b in bytes {
-        h ^= u64::from(b);
-        h = h.wrapping_mul(0x0100_0000_01b3);
-    }
-    h
 }
 
 #[test]

@@ -5,10 +5,10 @@
 //! fix gives. Then an adversarial corpus: every seed truncated at many offsets and
 //! mutated byte by byte (deterministically), again without a panic.
 
-use std::path::{Path, PathBuf};
-
 use tessera_mesh::fuzzing::{fuzz_gltf, fuzz_mtl, fuzz_obj, fuzz_ply, fuzz_stl, FUZZ_PATH};
 use tessera_mesh::{ImportReport, MeshError};
+use tessera_testkit::fuzz::{fuzz_files, read_bytes, regressions, Regression};
+use tessera_testkit::Rng;
 
 type Target = fn(&[u8]) -> Result<ImportReport, MeshError>;
 
@@ -109,24 +109,6 @@ fn target(name: &str) -> Target {
         .unwrap_or_else(|| panic!("no fuzz target {name}"))
 }
 
-fn fuzz_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz")
-}
-
-/// The files of `fuzz/<kind>/<target>/`, sorted (none when the folder is absent).
-fn files(kind: &str, target: &str) -> Vec<PathBuf> {
-    let mut v: Vec<PathBuf> = std::fs::read_dir(fuzz_dir().join(kind).join(target))
-        .map(|d| d.filter_map(|e| e.ok().map(|e| e.path())).collect())
-        .unwrap_or_default();
-    v.retain(|p| p.is_file());
-    v.sort();
-    v
-}
-
-fn read(p: &Path) -> Vec<u8> {
-    std::fs::read(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
-}
-
 fn assert_clear(e: &MeshError) {
     let m = e.to_string();
     assert!(
@@ -139,15 +121,15 @@ fn assert_clear(e: &MeshError) {
 #[test]
 fn corpora_replay_without_panics() {
     for (target, run) in TARGETS {
-        let seeds = files("corpus", target);
+        let seeds = fuzz_files("corpus", target);
         assert!(
             seeds.len() >= 5,
             "fuzz/corpus/{target} has {} seeds",
             seeds.len()
         );
         let mut ok = 0;
-        for f in seeds.iter().chain(&files("regressions", target)) {
-            match run(&read(f)) {
+        for f in seeds.iter().chain(&fuzz_files("regressions", target)) {
+            match run(&read_bytes(f)) {
                 Ok(_) => ok += 1,
                 Err(e) => assert_clear(&e),
             }
@@ -160,15 +142,8 @@ fn corpora_replay_without_panics() {
 #[test]
 fn regressions_give_their_errors() {
     for (target, run) in TARGETS {
-        for f in files("regressions", target) {
-            let name = f.file_name().unwrap().to_string_lossy().into_owned();
-            let Some(&(_, _, want)) = REGRESSIONS
-                .iter()
-                .find(|(t, n, _)| *t == target && *n == name)
-            else {
-                panic!("fuzz/regressions/{target}/{name} has no expected error in REGRESSIONS");
-            };
-            match run(&read(&f)) {
+        for Regression { name, bytes, want } in regressions(target, REGRESSIONS) {
+            match run(&bytes) {
                 Ok(r) => panic!("{target}/{name} reads as {r:?}, expected an error with {want:?}"),
                 Err(e) => {
                     assert_clear(&e);
@@ -189,20 +164,6 @@ fn malformed_inputs_give_their_errors() {
                 assert!(e.to_string().contains(&want), "{name}: {e}");
             }
         }
-    }
-}
-
-/// xorshift64*: deterministic mutations.
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
-    }
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n.max(1) as u64) as usize
     }
 }
 
@@ -239,7 +200,7 @@ fn malformed(seed: &[u8], rng: &mut Rng, count: usize) -> Vec<Vec<u8>> {
         for _ in 0..1 + rng.below(4) {
             let at = rng.below(b.len());
             match rng.below(4) {
-                0 => b[at] = rng.next() as u8,
+                0 => b[at] = rng.next_u64() as u8,
                 1 => b[at] ^= 1 << rng.below(8),
                 2 => {
                     let s = INTERESTING[rng.below(INTERESTING.len())];
@@ -266,7 +227,11 @@ fn adversarial_meshes_give_errors_not_panics() {
     let mut errors = 0;
     let mut seeds: Vec<(Target, Vec<u8>)> = Vec::new();
     for (target, run) in TARGETS {
-        seeds.extend(files("corpus", target).iter().map(|f| (run, read(f))));
+        seeds.extend(
+            fuzz_files("corpus", target)
+                .iter()
+                .map(|f| (run, read_bytes(f))),
+        );
     }
     seeds.extend(
         malformed_inputs()

@@ -359,29 +359,18 @@ fn bad_draco_primitives_are_one_error_naming_them() {
     );
 }
 
-/// A tiny xorshift generator: the same flips on every run.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        self.0
-    }
-}
-
 /// Flip bits and overwrite bytes of the Draco streams of `glb` (in `streams`), `n`
 /// times, through the fuzz target: never a panic (the target checks the visitor contract
 /// and that errors are one line), and every error names a Draco primitive.
 fn flip_streams(glb: &[u8], streams: &[Range<usize>], n: usize, seed: u64) -> (usize, usize) {
-    let mut rng = Rng(seed | 1);
+    // testkit's xorshift64*: the same flips on every run.
+    let mut rng = tessera_testkit::Rng(seed | 1);
     let (mut ok, mut err) = (0, 0);
     for _ in 0..n {
         let mut g = glb.to_vec();
-        let s = &streams[rng.next() as usize % streams.len()];
-        for _ in 0..1 + rng.next() % 8 {
-            let r = rng.next();
+        let s = &streams[rng.next_u64() as usize % streams.len()];
+        for _ in 0..1 + rng.next_u64() % 8 {
+            let r = rng.next_u64();
             // Half of the changes in the first 64 bytes: headers and counts.
             let span = if r & 1 == 0 { s.len().min(64) } else { s.len() };
             let i = s.start + (r >> 8) as usize % span;

@@ -5,6 +5,14 @@ mod common;
 use common::*;
 use tessera_mesh::{read_mesh, Attributes, ImageSource, MeshError, Wrap, NO_TEXTURE};
 
+/// What an OBJ with `vt` and `vn` corners and no material declares.
+const NORMALS_AND_UVS: Attributes = Attributes {
+    normals: true,
+    colors: false,
+    uvs: true,
+    textures: false,
+};
+
 #[test]
 fn direct_mode_positions_only() {
     let text = "# a quad and a triangle
@@ -68,15 +76,7 @@ f 3/3/2 2/2/2 1/1/2
 f 1/1/1 2/2/1 3/3/1
 ";
     let (r, c) = read_ok("vtn.obj", text.as_bytes());
-    assert_eq!(
-        c.headers[0].attributes,
-        Attributes {
-            normals: true,
-            colors: false,
-            uvs: true,
-            textures: false,
-        }
-    );
+    assert_eq!(c.headers[0].attributes, NORMALS_AND_UVS);
     assert_eq!(r.vertices, 6, "two normals per position");
     assert_eq!(c.triangles, vec![[0, 1, 2], [3, 4, 5], [0, 1, 2]]);
     assert_eq!(c.vertices[1].uv, [1.0, 0.0]);
@@ -89,15 +89,7 @@ fn all_corner_syntaxes_and_relative_indices() {
     let text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nvt 0.25 0.75\nvn 1 0 0\n\
                 f 1//1 2//1 3//1\nf 2/1 4/1 3/1\nf -3/-1/-1 -2 -1\n";
     let (r, c) = read_ok("syn.obj", text.as_bytes());
-    assert_eq!(
-        c.headers[0].attributes,
-        Attributes {
-            normals: true,
-            colors: false,
-            uvs: true,
-            textures: false,
-        }
-    );
+    assert_eq!(c.headers[0].attributes, NORMALS_AND_UVS);
     assert_eq!(r.triangles, 3);
     // v//vn corners get uv 0, v/vt corners normal 0.
     assert_eq!(c.vertices[0].uv, [0.0, 0.0]);

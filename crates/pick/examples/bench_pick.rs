@@ -19,33 +19,11 @@ use std::time::Instant;
 
 use tessera_format::Model;
 use tessera_pick::{pick_with, PickOptions, PickStats, Ray};
+use tessera_testkit::SplitMix64;
 
 fn usage() -> ! {
     eprintln!("usage: bench_pick MODEL.tsr [--rays N] [--batch B]");
     std::process::exit(2)
-}
-
-/// SplitMix64 in [0, 1).
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^= z >> 31;
-        (z >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn unit(&mut self) -> [f64; 3] {
-        loop {
-            let v = [self.next(), self.next(), self.next()].map(|x| 2.0 * x - 1.0);
-            let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-            if l > 1e-3 && l <= 1.0 {
-                return v.map(|x| x / l);
-            }
-        }
-    }
 }
 
 /// Drops the file's pages from the page cache (best effort).
@@ -114,13 +92,13 @@ fn main() {
         h.file_bytes
     );
     let [cx, cy, cz, r] = h.bounding_sphere;
-    let mut rng = Rng(42);
+    let mut rng = SplitMix64(42);
     let list: Vec<Ray> = (0..rays)
         .map(|_| {
-            let u = rng.unit();
-            let d = r * (2.0 + 2.0 * rng.next());
-            let v = rng.unit();
-            let s = 0.3 * r * rng.next().cbrt();
+            let u = rng.unit_vector();
+            let d = r * (2.0 + 2.0 * rng.next_f64());
+            let v = rng.unit_vector();
+            let s = 0.3 * r * rng.next_f64().cbrt();
             Ray::between(
                 [cx + u[0] * d, cy + u[1] * d, cz + u[2] * d],
                 [cx + v[0] * s, cy + v[1] * s, cz + v[2] * s],

@@ -35,7 +35,7 @@ fn data(name: &str) -> PathBuf {
     tessera_testkit::shared_data(name)
 }
 
-use tessera_testkit::small_options;
+use tessera_testkit::{small_options, SplitMix64};
 
 struct Built {
     _dir: tempfile::TempDir,
@@ -274,32 +274,6 @@ fn ray_edges(soup: &Soup, o: DVec3, d: DVec3) -> f64 {
 
 // ---------------------------------------------------------------- rays
 
-/// SplitMix64: deterministic pseudo-random numbers.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^= z >> 31;
-        (z >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn unit(&mut self) -> DVec3 {
-        loop {
-            let v = DVec3::new(self.next(), self.next(), self.next()) * 2.0 - 1.0;
-            let l = v.length();
-            if l > 1e-3 && l <= 1.0 {
-                return v / l;
-            }
-        }
-    }
-    fn in_ball(&mut self) -> DVec3 {
-        self.unit() * self.next().cbrt()
-    }
-}
-
 fn sphere_of(index: &ModelIndex) -> (DVec3, f64) {
     let s = index.header().bounding_sphere;
     (DVec3::new(s[0], s[1], s[2]), s[3])
@@ -309,11 +283,11 @@ fn sphere_of(index: &ModelIndex) -> (DVec3, f64) {
 /// aimed at random points of its interior (within 0.9 radii).
 fn rays_from_outside(index: &ModelIndex, count: usize, seed: u64) -> Vec<Ray> {
     let (c, r) = sphere_of(index);
-    let mut rng = Rng(seed);
+    let mut rng = SplitMix64(seed);
     (0..count)
         .map(|_| {
-            let from = c + rng.unit() * r * (1.5 + 2.0 * rng.next());
-            let to = c + rng.in_ball() * r * 0.9;
+            let from = c + DVec3::from(rng.unit_vector()) * r * (1.5 + 2.0 * rng.next_f64());
+            let to = c + DVec3::from(rng.in_ball()) * r * 0.9;
             Ray::between(from.to_array(), to.to_array())
         })
         .collect()
@@ -323,14 +297,14 @@ fn rays_from_outside(index: &ModelIndex, count: usize, seed: u64) -> Vec<Ray> {
 /// radii from its centre.
 fn rays_that_miss(index: &ModelIndex, count: usize, seed: u64) -> Vec<Ray> {
     let (c, r) = sphere_of(index);
-    let mut rng = Rng(seed);
+    let mut rng = SplitMix64(seed);
     (0..count)
         .map(|_| {
             // Along -u, passing `side * miss` (closest to the centre there).
-            let u = rng.unit();
+            let u = DVec3::from(rng.unit_vector());
             let side = u.any_orthonormal_vector();
-            let miss = r * (1.05 + rng.next());
-            let from = c + side * miss + u * r * (1.5 + 2.0 * rng.next());
+            let miss = r * (1.05 + rng.next_f64());
+            let from = c + side * miss + u * r * (1.5 + 2.0 * rng.next_f64());
             Ray::new(from.to_array(), (-u).to_array())
         })
         .collect()
@@ -340,11 +314,11 @@ fn rays_that_miss(index: &ModelIndex, count: usize, seed: u64) -> Vec<Ray> {
 /// random directions.
 fn rays_from_inside(index: &ModelIndex, count: usize, seed: u64) -> Vec<Ray> {
     let (c, r) = sphere_of(index);
-    let mut rng = Rng(seed);
+    let mut rng = SplitMix64(seed);
     (0..count)
         .map(|_| {
-            let from = c + rng.in_ball() * r * 0.5;
-            Ray::new(from.to_array(), rng.unit().to_array())
+            let from = c + DVec3::from(rng.in_ball()) * r * 0.5;
+            Ray::new(from.to_array(), rng.unit_vector())
         })
         .collect()
 }
@@ -571,9 +545,9 @@ fn generated_sphere_matches_brute_force_and_every_ray_from_inside_hits() {
     // The sphere is closed: from its centre every direction hits, at 1 +- noise.
     let index = b.model.index();
     let (c, _) = sphere_of(index);
-    let mut rng = Rng(99);
+    let mut rng = SplitMix64(99);
     for _ in 0..50 {
-        let ray = Ray::new(c.to_array(), rng.unit().to_array());
+        let ray = Ray::new(c.to_array(), rng.unit_vector());
         let (hit, _) = pick(&b.model, &ray).unwrap();
         let hit = hit.unwrap_or_else(|| panic!("{ray:?} escaped the closed sphere"));
         assert!(
@@ -675,11 +649,11 @@ fn a_paged_index_read_in_part_gives_coarser_hits_marked_inexact() {
             index: index.clone(),
         };
         let complete = index.is_complete();
-        let mut rng = Rng(5 + rounds);
+        let mut rng = SplitMix64(5 + rounds);
         for _ in 0..30 {
             // From the centre of the closed sphere: every ray hits a cut of the shown
             // levels too (a uniform cut is crack-free).
-            let ray = Ray::new(c.to_array(), rng.unit().to_array());
+            let ray = Ray::new(c.to_array(), rng.unit_vector());
             let (hit, stats) = pick(&reader, &ray).unwrap();
             assert!(stats.skipped.is_empty());
             let hit = hit.unwrap_or_else(|| panic!("{shown} nodes shown: {ray:?} escaped"));

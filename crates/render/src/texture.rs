@@ -64,6 +64,37 @@ fn mips_fit(width: u32, height: u32, mips: &[Vec<u8>]) -> bool {
         })
 }
 
+/// Copies one level of `texture` (its mip `mip_level`, `size` texels: whole 4x4 blocks
+/// for BC7) from `data`, `rows[1]` rows of `rows[0]` bytes.
+fn write_level(
+    queue: &wgpu::Queue,
+    texture: &wgpu::Texture,
+    mip_level: u32,
+    data: &[u8],
+    rows: [u32; 2],
+    size: [u32; 2],
+) {
+    queue.write_texture(
+        wgpu::TexelCopyTextureInfo {
+            texture,
+            mip_level,
+            origin: wgpu::Origin3d::ZERO,
+            aspect: wgpu::TextureAspect::All,
+        },
+        data,
+        wgpu::TexelCopyBufferLayout {
+            offset: 0,
+            bytes_per_row: Some(rows[0]),
+            rows_per_image: Some(rows[1]),
+        },
+        wgpu::Extent3d {
+            width: size[0],
+            height: size[1],
+            depth_or_array_layers: 1,
+        },
+    );
+}
+
 /// The bind group layout of a patch texture (group 1 of the textured pipeline): the
 /// texture at binding 0, its sampler at binding 1.
 pub fn texture_bind_group_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
@@ -142,27 +173,33 @@ impl TextureKit {
         self.grey.clone().expect("made with the kit")
     }
 
+    /// A texture for the levels of a `width` x `height` image from the first that fits
+    /// `max_dim` down; returns it, that first level and the whole chain's level count.
     fn create(
         device: &wgpu::Device,
         width: u32,
         height: u32,
-        levels: u32,
+        max_dim: u32,
         format: wgpu::TextureFormat,
-    ) -> wgpu::Texture {
-        device.create_texture(&wgpu::TextureDescriptor {
+    ) -> (wgpu::Texture, u32, u32) {
+        let first = first_level(width, height, max_dim);
+        let levels = mip_level_count(width, height);
+        let (w0, h0) = level_size(width, height, first);
+        let texture = device.create_texture(&wgpu::TextureDescriptor {
             label: Some("tessera patch texture"),
             size: wgpu::Extent3d {
-                width,
-                height,
+                width: w0,
+                height: h0,
                 depth_or_array_layers: 1,
             },
-            mip_level_count: levels,
+            mip_level_count: levels - first,
             sample_count: 1,
             dimension: wgpu::TextureDimension::D2,
             format,
             usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
             view_formats: &[],
-        })
+        });
+        (texture, first, levels)
     }
 
     /// Uploads `rgba` (`width` x `height`, rows top to bottom, `4 * width * height`
@@ -180,10 +217,8 @@ impl TextureKit {
         mips: &[Vec<u8>],
         max_dim: u32,
     ) -> SlotTexture {
-        let first = first_level(width, height, max_dim);
-        let levels = mip_level_count(width, height);
-        let (w0, h0) = level_size(width, height, first);
-        let texture = Self::create(device, w0, h0, levels - first, PATCH_TEXTURE_FORMAT);
+        let (texture, first, levels) =
+            Self::create(device, width, height, max_dim, PATCH_TEXTURE_FORMAT);
         let made = mips_fit(width, height, mips);
         let mut level: std::borrow::Cow<[u8]> = std::borrow::Cow::Borrowed(rgba);
         let (mut w, mut h) = (width, height);
@@ -201,25 +236,7 @@ impl TextureKit {
             if l < first {
                 continue;
             }
-            queue.write_texture(
-                wgpu::TexelCopyTextureInfo {
-                    texture: &texture,
-                    mip_level: l - first,
-                    origin: wgpu::Origin3d::ZERO,
-                    aspect: wgpu::TextureAspect::All,
-                },
-                &level,
-                wgpu::TexelCopyBufferLayout {
-                    offset: 0,
-                    bytes_per_row: Some(4 * w),
-                    rows_per_image: Some(h),
-                },
-                wgpu::Extent3d {
-                    width: w,
-                    height: h,
-                    depth_or_array_layers: 1,
-                },
-            );
+            write_level(queue, &texture, l - first, &level, [4 * w, h], [w, h]);
             bytes += 4 * u64::from(w) * u64::from(h);
         }
         self.bind(device, texture, bytes)
@@ -237,10 +254,8 @@ impl TextureKit {
         blocks: &[Vec<u8>],
         max_dim: u32,
     ) -> SlotTexture {
-        let first = first_level(width, height, max_dim);
-        let levels = mip_level_count(width, height);
-        let (w0, h0) = level_size(width, height, first);
-        let texture = Self::create(device, w0, h0, levels - first, BC7_TEXTURE_FORMAT);
+        let (texture, first, levels) =
+            Self::create(device, width, height, max_dim, BC7_TEXTURE_FORMAT);
         let mut bytes = 0;
         for l in first..levels {
             let (w, h) = level_size(width, height, l);
@@ -248,24 +263,13 @@ impl TextureKit {
             let (bw, bh) = (w.div_ceil(4), h.div_ceil(4));
             let data = &blocks[l as usize];
             debug_assert_eq!(data.len(), bc7_level_bytes(w, h));
-            queue.write_texture(
-                wgpu::TexelCopyTextureInfo {
-                    texture: &texture,
-                    mip_level: l - first,
-                    origin: wgpu::Origin3d::ZERO,
-                    aspect: wgpu::TextureAspect::All,
-                },
+            write_level(
+                queue,
+                &texture,
+                l - first,
                 data,
-                wgpu::TexelCopyBufferLayout {
-                    offset: 0,
-                    bytes_per_row: Some(16 * bw),
-                    rows_per_image: Some(bh),
-                },
-                wgpu::Extent3d {
-                    width: 4 * bw,
-                    height: 4 * bh,
-                    depth_or_array_layers: 1,
-                },
+                [16 * bw, bh],
+                [4 * bw, 4 * bh],
             );
             bytes += data.len() as u64;
         }

@@ -178,6 +178,33 @@ fn camera_strategy() -> impl Strategy<Value = Option<Camera>> {
         })
 }
 
+/// A random forest (and its seed) seen by a random camera at a random tolerance: what the
+/// view-dependent properties are checked on.
+#[derive(Debug)]
+struct ViewCase {
+    seed: u64,
+    h: Header,
+    nodes: Vec<NodeRecord>,
+    camera: Camera,
+    tolerance_px: f32,
+}
+
+/// [`ViewCase`]s of 400-node forests; `None` where the camera is degenerate (the case
+/// passes).
+fn view_case() -> impl Strategy<Value = Option<ViewCase>> {
+    (any::<u64>(), camera_strategy(), 0.05f32..50.0).prop_map(|(seed, camera, tolerance_px)| {
+        let camera = camera?;
+        let (h, nodes) = random_forest(seed, 400);
+        Some(ViewCase {
+            seed,
+            h,
+            nodes,
+            camera,
+            tolerance_px,
+        })
+    })
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(200))]
 
@@ -197,12 +224,9 @@ proptest! {
 
     #[test]
     fn view_cuts_cover_once_without_culling_and_culling_only_removes(
-        seed in any::<u64>(),
-        camera in camera_strategy(),
-        tolerance_px in 0.05f32..50.0,
+        case in view_case(),
     ) {
-        let Some(camera) = camera else { return Ok(()); };
-        let (h, nodes) = random_forest(seed, 400);
+        let Some(ViewCase { h, nodes, camera, tolerance_px, .. }) = case else { return Ok(()); };
         let all = select_cut(&h, &nodes, &Criterion::View { camera: camera.clone(), tolerance_px, cull: false });
         assert_covers_once(&h, &nodes, &all.nodes);
         let culled = select_cut(&h, &nodes, &Criterion::View { camera, tolerance_px, cull: true });
@@ -216,12 +240,9 @@ proptest! {
 
     #[test]
     fn view_refinement_is_monotone(
-        seed in any::<u64>(),
-        camera in camera_strategy(),
-        tolerance_px in 0.05f32..50.0,
+        case in view_case(),
     ) {
-        let Some(camera) = camera else { return Ok(()); };
-        let (h, nodes) = random_forest(seed, 400);
+        let Some(ViewCase { h, nodes, camera, tolerance_px, .. }) = case else { return Ok(()); };
         let p = ViewParams::new(&camera, h.cube_origin, tolerance_px, false);
         for (i, parent) in nodes.iter().enumerate() {
             if p.needs_refinement(parent) {
@@ -243,14 +264,11 @@ proptest! {
     /// resident nodes, never two on one root-leaf path, and asks only for missing ones.
     #[test]
     fn select_resident_matches_select_cut_and_respects_residency(
-        seed in any::<u64>(),
-        camera in camera_strategy(),
-        tolerance_px in 0.05f32..50.0,
+        case in view_case(),
         cull in any::<bool>(),
         keep in 0u64..8,
     ) {
-        let Some(camera) = camera else { return Ok(()); };
-        let (h, nodes) = random_forest(seed, 400);
+        let Some(ViewCase { seed, h, nodes, camera, tolerance_px }) = case else { return Ok(()); };
         let nv = NodeView::new(&h, &nodes);
         let view = ViewParams::new(&camera, h.cube_origin, tolerance_px, cull);
         let mut sel = Selection::default();
@@ -274,15 +292,12 @@ proptest! {
     /// camera, is unloadable with a larger growth.
     #[test]
     fn prefetch_and_unload_thresholds_nest(
-        seed in any::<u64>(),
-        camera in camera_strategy(),
-        tolerance_px in 0.05f32..50.0,
+        case in view_case(),
         cull in any::<bool>(),
         growth in 1.0f32..3.0,
         extra in 0.0f32..2.0,
     ) {
-        let Some(camera) = camera else { return Ok(()); };
-        let (h, nodes) = random_forest(seed, 400);
+        let Some(ViewCase { h, nodes, camera, tolerance_px, .. }) = case else { return Ok(()); };
         let nv = NodeView::new(&h, &nodes);
         let view = ViewParams::new(&camera, h.cube_origin, tolerance_px, cull);
         let mut sel = Selection::default();

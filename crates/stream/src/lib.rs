@@ -23,7 +23,11 @@
 //!
 //! Both caches the scheduler keeps (decoded patches in RAM, groups in the store) use one
 //! [`Lru`] type under a byte budget, with one frame counter for recency.
+//!
+//! [`bench`]: the core over a model held in memory ([`bench::SliceSource`] and a
+//! [`CountingStore`]), its frames run and timed the same way natively and in WebAssembly.
 
+pub mod bench;
 mod drive;
 mod groups;
 pub mod impostor;

@@ -251,6 +251,18 @@ fn options(store_budget: u64) -> SchedulerOptions {
     }
 }
 
+/// A scheduler over `m` with [`options`] of 64 MiB and no culling: the whole model's
+/// cut, whatever the camera sees.
+fn unculled(m: &Model) -> Scheduler {
+    Scheduler::new(
+        m.index(),
+        SchedulerOptions {
+            cull: false,
+            ..options(64 << 20)
+        },
+    )
+}
+
 /// The cut drawn, welded, as an edge report.
 fn cut_edges(m: &Model, draw: &[u32]) -> tessera_select::EdgeReport {
     let patches: Vec<PatchData> = draw
@@ -297,13 +309,7 @@ fn settle(
 #[test]
 fn partly_resident_cuts_are_crack_free() {
     let m = model();
-    let mut s = Scheduler::new(
-        m.index(),
-        SchedulerOptions {
-            cull: false,
-            ..options(64 << 20)
-        },
-    );
+    let mut s = unculled(&m);
     let mut src = TestSource::new(m.clone(), 2).chaotic();
     let mut store = FakeStore::new(u64::MAX);
     s.load_roots(&mut src, &mut store);
@@ -595,13 +601,7 @@ fn every_source_reaches_the_same_cut() {
     let mut src = TestSource::new(m.clone(), 5).chaotic();
     src.fail.insert(victim);
     let failed_cut = {
-        let mut s = Scheduler::new(
-            m.index(),
-            SchedulerOptions {
-                cull: false,
-                ..options(64 << 20)
-            },
-        );
+        let mut s = unculled(&m);
         let mut store = FakeStore::new(u64::MAX);
         s.load_roots(&mut src, &mut store);
         let mut t = 0.0;
@@ -660,13 +660,7 @@ fn ram_cache_stays_within_budget() {
 #[test]
 fn lowered_budgets_evict_down_at_the_next_frame() {
     let m = model();
-    let mut s = Scheduler::new(
-        m.index(),
-        SchedulerOptions {
-            cull: false,
-            ..options(64 << 20)
-        },
-    );
+    let mut s = unculled(&m);
     let mut src = TestSource::new(m.clone(), 64);
     let mut store = FakeStore::new(u64::MAX);
     s.load_roots(&mut src, &mut store);

@@ -193,50 +193,61 @@ pub fn draw(ctx: &egui::Context, hud: &mut Hud, info: &Info) -> Vec<Action> {
                 s.frame_ms
             ));
             frame_plot(ui, &hud.frame_ms);
-            egui::Grid::new("stats").num_columns(2).show(ui, |ui| {
-                ui.label("triangles");
-                ui.label(format!("{}", s.triangles));
-                ui.end_row();
-                ui.label("patches");
-                ui.label(format!("{} (level <= {})", s.selected_nodes, s.max_level));
-                ui.end_row();
-                ui.label("GPU cache");
-                ui.label(format!(
-                    "{:.0} / {:.0} MiB",
-                    mib(s.gpu_resident_bytes),
-                    mib(info.gpu_budget)
-                ));
-                ui.end_row();
-                ui.label("RAM cache");
-                ui.label(format!(
-                    "{:.0} / {:.0} MiB",
-                    mib(s.ram_resident_bytes),
-                    mib(info.ram_budget)
-                ));
-                ui.end_row();
-                ui.label("pending loads");
-                ui.label(format!("{}", s.pending_loads));
-                ui.end_row();
-                ui.label("morph ratio");
-                ui.label(format!("mean {:.2}, max {:.2}", s.morph_mean, s.morph_max));
-                ui.end_row();
-                ui.label("read");
-                ui.label(format!("{:.1} MiB/s", info.bytes_read_per_s / 1048576.0));
-                ui.end_row();
-                if let Some(im) = &info.impostors {
-                    ui.label("impostors");
-                    ui.label(format!(
+            // One row a figure: (label, value).
+            let mut rows = vec![
+                ("triangles", format!("{}", s.triangles)),
+                (
+                    "patches",
+                    format!("{} (level <= {})", s.selected_nodes, s.max_level),
+                ),
+                (
+                    "GPU cache",
+                    format!(
+                        "{:.0} / {:.0} MiB",
+                        mib(s.gpu_resident_bytes),
+                        mib(info.gpu_budget)
+                    ),
+                ),
+                (
+                    "RAM cache",
+                    format!(
+                        "{:.0} / {:.0} MiB",
+                        mib(s.ram_resident_bytes),
+                        mib(info.ram_budget)
+                    ),
+                ),
+                ("pending loads", format!("{}", s.pending_loads)),
+                (
+                    "morph ratio",
+                    format!("mean {:.2}, max {:.2}", s.morph_mean, s.morph_max),
+                ),
+                (
+                    "read",
+                    format!("{:.1} MiB/s", info.bytes_read_per_s / 1048576.0),
+                ),
+            ];
+            if let Some(im) = &info.impostors {
+                rows.push((
+                    "impostors",
+                    format!(
                         "{} drawn, {} dissolving, {:.1} MiB, {} triangles saved",
                         im.impostors,
                         im.transitioning,
                         mib(im.texture_bytes),
                         im.triangles_saved
-                    ));
-                    ui.end_row();
-                }
-                if s.failed_patches > 0 {
-                    ui.label("failed patches");
-                    ui.label(format!("{} (parents drawn)", s.failed_patches));
+                    ),
+                ));
+            }
+            if s.failed_patches > 0 {
+                rows.push((
+                    "failed patches",
+                    format!("{} (parents drawn)", s.failed_patches),
+                ));
+            }
+            egui::Grid::new("stats").num_columns(2).show(ui, |ui| {
+                for (label, value) in rows {
+                    ui.label(label);
+                    ui.label(value);
                     ui.end_row();
                 }
             });

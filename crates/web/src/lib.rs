@@ -20,6 +20,10 @@
 //!   (a one-pixel pass packing the depth's bits into RGBA8), for zoom to the cursor,
 //!   double-click recentre and pinch about the fingers.
 //!
+//! - `probe` (wasm32): `probeRun` and `ProbeBench`, the streaming core over a model
+//!   file's bytes with no device or fetch, which `scripts/check-wasm` and
+//!   `scripts/bench-web` run under Node.
+//!
 //! - [`budget`]: one memory budget for every model on the page (views and three.js
 //!   models), split each frame by their demand as the desktop splits its scene's.
 //!   Plain Rust, tested natively.
@@ -51,6 +55,8 @@ pub mod wire;
 mod http;
 #[cfg(target_arch = "wasm32")]
 mod pick;
+#[cfg(target_arch = "wasm32")]
+mod probe;
 #[cfg(target_arch = "wasm32")]
 mod stream;
 #[cfg(target_arch = "wasm32")]

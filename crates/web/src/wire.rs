@@ -424,6 +424,23 @@ mod tests {
         out
     }
 
+    /// The job of a one-triangle patch (3 vertices, grid origin 0), no mips or blocks.
+    fn triangle_job(node: u32, attributes: u32, crc32: u32, texture_size: [u16; 2]) -> Job {
+        Job {
+            node,
+            attributes,
+            crc32,
+            shape: PatchShape {
+                quant_min: [0; 3],
+                vertex_count: 3,
+                triangle_count: 1,
+                texture_size,
+            },
+            mips: false,
+            blocks: false,
+        }
+    }
+
     #[test]
     fn job_round_trip() {
         let job = Job {
@@ -451,19 +468,7 @@ mod tests {
 
     #[test]
     fn reply_of_a_failed_decode_is_the_error() {
-        let job = Job {
-            node: 3,
-            attributes: 0,
-            crc32: 0,
-            shape: PatchShape {
-                quant_min: [0; 3],
-                vertex_count: 3,
-                triangle_count: 1,
-                texture_size: [0, 0],
-            },
-            mips: false,
-            blocks: false,
-        };
+        let job = triangle_job(3, 0, 0, [0, 0]);
         let reply = run_job(&job.to_bytes(b"not a patch"), chain, clock);
         match read_reply(3, &reply[..]).unwrap().0 {
             Answer::Failed { node, error } => {
@@ -549,19 +554,8 @@ mod tests {
         let attributes = ATTR_UVS | ATTR_TEXTURE;
         let bytes = encode_patch(&p, attributes, [0; 3]);
         let job = |blocks: Option<u32>| {
-            let mut j = Job {
-                node: 1,
-                attributes,
-                crc32: crc32fast::hash(&bytes),
-                shape: PatchShape {
-                    quant_min: [0; 3],
-                    vertex_count: 3,
-                    triangle_count: 1,
-                    texture_size: [8, 8],
-                },
-                mips: true,
-                blocks: false,
-            };
+            let mut j = triangle_job(1, attributes, crc32fast::hash(&bytes), [8, 8]);
+            j.mips = true;
             j.blocks = blocks.is_some_and(|max| texels::bc7_uploads_as_blocks(8, 8, max));
             j
         };

@@ -5,24 +5,21 @@ pub mod model;
 
 use tessera_format::PatchData;
 
-/// xorshift64*: deterministic, dependency-free noise.
-pub struct Rng(pub u64);
+pub use tessera_testkit::Rng;
 
-impl Rng {
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
-    }
-    /// Uniform in [0, 1).
-    pub fn unit(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-    /// Uniform integer in [-r, r].
-    pub fn jitter(&mut self, r: i64) -> i64 {
-        (self.next_u64() % (2 * r as u64 + 1)) as i64 - r
-    }
+/// The triangles of `indices`, each rotated to start at its smallest vertex (meshopt's
+/// index codec may rotate a triangle's vertices).
+pub fn rotate_min_first(indices: &[u32]) -> Vec<[u32; 3]> {
+    indices
+        .chunks(3)
+        .map(|t| {
+            // Lexicographically smallest rotation: canonical even for degenerate triangles.
+            (0..3)
+                .map(|m| [t[m], t[(m + 1) % 3], t[(m + 2) % 3]])
+                .min()
+                .unwrap()
+        })
+        .collect()
 }
 
 fn normalize(v: [f64; 3]) -> [f32; 3] {
@@ -62,11 +59,8 @@ pub fn terrain_patch(cells: usize, spacing: f64, morph: bool, seed: u64) -> Patc
     let mut indices = Vec::with_capacity(cells * cells * 6);
     for j in 0..cells {
         for i in 0..cells {
-            let a = (j * side + i) as u32;
-            let b = a + 1;
-            let c = a + side as u32;
-            let d = c + 1;
-            indices.extend_from_slice(&[a, b, d, a, d, c]);
+            let cell = tessera_gen::grid_cell_triangles(side as u64, i as u64, j as u64);
+            indices.extend(cell.into_iter().flatten());
         }
     }
     let morph_targets: Vec<[u32; 3]> = if morph {

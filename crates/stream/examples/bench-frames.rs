@@ -1,14 +1,15 @@
 //! Native half of the WebAssembly selection timing (`scripts/bench-web`; the wasm half
-//! is `crates/wasm-probe/bench.mjs`): the same [`Bench`] over the same model and orbit,
-//! each frame timed around the call with `Instant` (the wasm host times the same call
-//! with `performance.now()`). Prints one JSON object, the same fields as bench.mjs.
+//! is the browser module's `ProbeBench`, `crates/web/src/probe.rs`, driven by
+//! `scripts/wasm/bench.mjs`): the same [`Bench`] over the same model and orbit, each
+//! frame timed around the call with `Instant` (the wasm host times the same call with
+//! `performance.now()`). Prints one JSON object, the same fields as bench.mjs.
 //!
-//! `cargo run --release -p tessera-wasm-probe --features native-bench --bin bench-frames -- MODEL.tsr
+//! `cargo run --release -p tessera-stream --example bench-frames -- MODEL.tsr
 //!  [frames 24] [passes 5] [width 1280] [height 720] [distance 2.0]`
 
 use std::time::Instant;
 
-use tessera_wasm_probe::{Bench, BenchOptions};
+use tessera_stream::bench::{Bench, BenchOptions};
 
 fn main() {
     let a: Vec<String> = std::env::args().skip(1).collect();
@@ -24,11 +25,7 @@ fn main() {
     };
     let passes = num(2, 5.0) as u32;
     let t = Instant::now();
-    let bytes: &'static [u8] = Box::leak(
-        std::fs::read(model)
-            .expect("read the model")
-            .into_boxed_slice(),
-    );
+    let bytes = std::fs::read(model).expect("read the model");
     let read_ms = t.elapsed().as_secs_f64() * 1e3;
     let t = Instant::now();
     let mut b = Bench::open(bytes, &opts).expect("open the model");
