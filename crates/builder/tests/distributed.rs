@@ -186,7 +186,9 @@ fn issue_36_input_unreadable_on_one_rank_stops_all_with_its_error() {
                 s.spawn(move || build_distributed(input, out, &small(), &NoProgress, &p))
             })
             .collect();
-        hs.into_iter().map(|h| h.join().unwrap()).collect::<Vec<_>>()
+        hs.into_iter()
+            .map(|h| h.join().unwrap())
+            .collect::<Vec<_>>()
     });
     for (rank, r) in results.into_iter().enumerate() {
         assert_eq!(r.unwrap_err().to_string(), single, "rank {rank}");

@@ -244,7 +244,7 @@ fn issue_36_mpirun_a_signalled_rank_stops_every_rank_cleanly() {
     // Big enough that the build is still running when the signal comes (~4 s here).
     let input = sphere_of(dir.path(), "1000000");
     let out = dir.path().join("never.tsr");
-    let mut job = Command::new(&mpirun)
+    let job = Command::new(&mpirun)
         .args([
             "--oversubscribe",
             "--allow-run-as-root",

@@ -108,7 +108,7 @@ impl<R: ResidentStore + ?Sized> ResidentStore for &mut R {
 
 /// A store that holds nothing but counts: bytes as a GPU store would take them
 /// (24 bytes a vertex, 4 an index). For running the scheduler without a device:
-/// policy tests, the WebAssembly probe, benchmarks of the streaming core.
+/// policy tests, the bench module (`crate::bench`), benchmarks of the streaming core.
 #[derive(Debug, Default)]
 pub struct CountingStore {
     bytes: u64,
