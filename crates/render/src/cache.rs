@@ -1001,9 +1001,6 @@ impl ResidentStore for GpuStore<'_> {
             .sum();
         self.cache.has_room_for(nv, ni, nt)
     }
-    fn upload(&mut self, node: u32, patch: &PatchData) -> Result<u64, StoreError> {
-        self.upload_in_group(node, patch, &[])
-    }
     fn upload_in_group(
         &mut self,
         node: u32,

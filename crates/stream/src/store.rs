@@ -45,20 +45,20 @@ pub trait ResidentStore {
         let _ = patches;
         true
     }
-    /// Makes `node`'s patch resident; returns the bytes it takes.
-    fn upload(&mut self, node: u32, patch: &PatchData) -> Result<u64, StoreError>;
-    /// [`ResidentStore::upload`] of a member of a residency group with other patches of
-    /// the group at hand (`siblings`, those loaded with it; may be incomplete): a store
-    /// that draws morph targets takes a target's attributes from the sibling holding
-    /// the surviving vertex when the patch itself does not. Default: `upload`.
+    /// Makes `node`'s patch resident; returns the bytes it takes. `siblings`: the other
+    /// patches of its residency group at hand (those loaded with it; may be incomplete,
+    /// or empty): a store that draws morph targets takes a target's attributes from the
+    /// sibling holding the surviving vertex when the patch itself does not; other
+    /// stores ignore them.
     fn upload_in_group(
         &mut self,
         node: u32,
         patch: &PatchData,
         siblings: &[&PatchData],
-    ) -> Result<u64, StoreError> {
-        let _ = siblings;
-        self.upload(node, patch)
+    ) -> Result<u64, StoreError>;
+    /// [`ResidentStore::upload_in_group`] with no sibling at hand.
+    fn upload(&mut self, node: u32, patch: &PatchData) -> Result<u64, StoreError> {
+        self.upload_in_group(node, patch, &[])
     }
     /// Frees `node`'s patch (nothing if not resident).
     fn evict(&mut self, node: u32);
@@ -83,9 +83,6 @@ impl<R: ResidentStore + ?Sized> ResidentStore for &mut R {
     }
     fn has_room(&self, patches: &[&PatchData]) -> bool {
         (**self).has_room(patches)
-    }
-    fn upload(&mut self, node: u32, patch: &PatchData) -> Result<u64, StoreError> {
-        (**self).upload(node, patch)
     }
     fn upload_in_group(
         &mut self,
@@ -130,7 +127,12 @@ impl ResidentStore for CountingStore {
     fn bytes_for(&self, p: &PatchData) -> u64 {
         p.positions.len() as u64 * 24 + p.indices.len() as u64 * 4
     }
-    fn upload(&mut self, node: u32, p: &PatchData) -> Result<u64, StoreError> {
+    fn upload_in_group(
+        &mut self,
+        node: u32,
+        p: &PatchData,
+        _siblings: &[&PatchData],
+    ) -> Result<u64, StoreError> {
         let b = self.bytes_for(p);
         if let Some(old) = self.held.insert(node, b) {
             self.bytes -= old;

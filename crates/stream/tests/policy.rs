@@ -97,7 +97,12 @@ impl ResidentStore for FakeStore {
     fn bytes_for(&self, p: &PatchData) -> u64 {
         p.positions.len() as u64 * 24 + p.indices.len() as u64 * 4
     }
-    fn upload(&mut self, node: u32, p: &PatchData) -> Result<u64, StoreError> {
+    fn upload_in_group(
+        &mut self,
+        node: u32,
+        p: &PatchData,
+        _siblings: &[&PatchData],
+    ) -> Result<u64, StoreError> {
         assert!(!self.held.contains_key(&node), "node {node} uploaded twice");
         let b = self.bytes_for(p);
         if self.bytes + b > self.capacity {

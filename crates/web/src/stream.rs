@@ -281,9 +281,6 @@ impl ResidentStore for KeptStore {
             self.max_texture_dim,
         )
     }
-    fn upload(&mut self, node: u32, patch: &PatchData) -> Result<u64, StoreError> {
-        self.upload_in_group(node, patch, &[])
-    }
     fn upload_in_group(
         &mut self,
         node: u32,

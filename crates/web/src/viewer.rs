@@ -464,9 +464,6 @@ impl ResidentStore for TimedStore<'_> {
     fn has_room(&self, patches: &[&PatchData]) -> bool {
         self.inner.has_room(patches)
     }
-    fn upload(&mut self, node: u32, patch: &PatchData) -> Result<u64, StoreError> {
-        self.upload_in_group(node, patch, &[])
-    }
     fn upload_in_group(
         &mut self,
         node: u32,
