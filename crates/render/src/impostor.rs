@@ -179,20 +179,13 @@ impl ImpostorRenderer {
                 view_formats: &[],
             });
             let view = texture.create_view(&Default::default());
-            let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("tessera impostor texture"),
-                layout: &self.texture_layout,
-                entries: &[
-                    wgpu::BindGroupEntry {
-                        binding: 0,
-                        resource: wgpu::BindingResource::TextureView(&view),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 1,
-                        resource: wgpu::BindingResource::Sampler(&self.sampler),
-                    },
-                ],
-            });
+            let bind_group = crate::texture::texture_bind_group(
+                device,
+                &self.texture_layout,
+                &view,
+                &self.sampler,
+                "tessera impostor texture",
+            );
             self.targets[slot] = Some(Target {
                 size,
                 view,

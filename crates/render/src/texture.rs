@@ -121,6 +121,30 @@ pub fn texture_bind_group_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout
     })
 }
 
+/// A bind group of [`texture_bind_group_layout`]: `view` and `sampler`.
+pub(crate) fn texture_bind_group(
+    device: &wgpu::Device,
+    layout: &wgpu::BindGroupLayout,
+    view: &wgpu::TextureView,
+    sampler: &wgpu::Sampler,
+    label: &str,
+) -> wgpu::BindGroup {
+    device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some(label),
+        layout,
+        entries: &[
+            wgpu::BindGroupEntry {
+                binding: 0,
+                resource: wgpu::BindingResource::TextureView(view),
+            },
+            wgpu::BindGroupEntry {
+                binding: 1,
+                resource: wgpu::BindingResource::Sampler(sampler),
+            },
+        ],
+    })
+}
+
 /// A patch texture as the GPU cache holds it (in its [`crate::Slot`]): the texture and
 /// the bind group the textured pipeline draws it with. Dropped (freed) with its slot.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -282,20 +306,13 @@ impl TextureKit {
             label: Some("tessera patch texture view"),
             ..Default::default()
         });
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("tessera patch texture bind group"),
-            layout: &self.layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: wgpu::BindingResource::TextureView(&view),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: wgpu::BindingResource::Sampler(&self.sampler),
-                },
-            ],
-        });
+        let bind_group = texture_bind_group(
+            device,
+            &self.layout,
+            &view,
+            &self.sampler,
+            "tessera patch texture bind group",
+        );
         SlotTexture {
             texture,
             bind_group,
