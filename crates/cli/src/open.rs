@@ -42,25 +42,8 @@ impl OpenedScene {
     /// The scene's framing points: each distinct model's root vertices (at most
     /// `max_points` in all), placed wherever it stands.
     pub fn points(&self, max_points: usize) -> tessera_nav::ScenePoints {
-        let mut distinct: Vec<(*const (), tessera_nav::ScenePoints)> = Vec::new();
         let per = (max_points / self.models.len().max(1)).max(16);
-        let parts: Vec<tessera_nav::ScenePoints> = self
-            .models
-            .iter()
-            .map(|(m, placement)| {
-                let key = Arc::as_ptr(m) as *const ();
-                let points = match distinct.iter().find(|(k, _)| *k == key) {
-                    Some((_, p)) => p.clone(),
-                    None => {
-                        let p = tessera_nav::scene_points(m.as_ref(), per);
-                        distinct.push((key, p.clone()));
-                        p
-                    }
-                };
-                points.placed(placement)
-            })
-            .collect();
-        tessera_nav::ScenePoints::union(&parts)
+        tessera_nav::ScenePoints::union(&tessera_nav::placed_scene_points(&self.models, per))
     }
 }
 

@@ -66,5 +66,8 @@ pub use navigator::{
     MIN_DISTANCE_RADII, PITCH_LIMIT_DEG, RECENTRE_DURATION_S, RESET_DURATION_S, VELOCITY_WINDOW_S,
     ZOOM_STEP_FACTOR, ZOOM_TIME_CONSTANT_S,
 };
-pub use scene::{home_navigator, majority_up, orbit_path, scene_points, OrbitCameras, ScenePoints};
+pub use scene::{
+    home_navigator, majority_up, orbit_path, placed_scene_points, scene_points, OrbitCameras,
+    ScenePoints,
+};
 pub use up::{guess_up, UpAxis, UpAxisParseError, UP_AXES};

@@ -77,6 +77,30 @@ impl ScenePoints {
     }
 }
 
+/// Each placed model's framing points ([`scene_points`], `per_model` at most), placed
+/// where it stands; a reader placed several times (the same `Arc`) is decoded once.
+pub fn placed_scene_points(
+    models: &[(std::sync::Arc<dyn PatchReader>, tessera_select::Placement)],
+    per_model: usize,
+) -> Vec<ScenePoints> {
+    let mut decoded: Vec<(*const (), ScenePoints)> = Vec::new();
+    models
+        .iter()
+        .map(|(m, placement)| {
+            let key = std::sync::Arc::as_ptr(m) as *const ();
+            let own = match decoded.iter().find(|(k, _)| *k == key) {
+                Some((_, p)) => p.clone(),
+                None => {
+                    let p = scene_points(m.as_ref(), per_model);
+                    decoded.push((key, p.clone()));
+                    p
+                }
+            };
+            own.placed(placement)
+        })
+        .collect()
+}
+
 /// Decodes the roots of `model` (at most `max_points` vertices kept, evenly strided).
 /// Roots that fail to decode are skipped; with none left, the header's bounding sphere's
 /// box stands in.

@@ -25,7 +25,7 @@ use crate::blit::Blit;
 use crate::hud::{self, Action, Hud};
 use crate::pickers::{Picked, Picker, Purpose};
 use crate::{ViewArgs, ViewError};
-use tessera_nav::{home_navigator, majority_up, scene_points, ScenePoints};
+use tessera_nav::{home_navigator, majority_up, ScenePoints};
 
 /// Two presses closer than this (and a few pixels) are a double-click.
 const DOUBLE_CLICK: Duration = Duration::from_millis(350);
@@ -266,23 +266,12 @@ impl Running {
         // near 20k points (framing), placed where each copy stands, and each box for the
         // up axis.
         let per_model = (20_000 / models.len()).max(64);
-        let mut decoded: Vec<(*const (), ScenePoints)> = Vec::new();
-        let parts: Vec<ScenePoints> = models
+        let placed: Vec<(Arc<dyn PatchReader>, Placement)> = models
             .iter()
-            .zip(&placements)
-            .map(|(m, placement)| {
-                let key = Arc::as_ptr(m) as *const ();
-                let own = match decoded.iter().find(|(k, _)| *k == key) {
-                    Some((_, p)) => p.clone(),
-                    None => {
-                        let p = scene_points(m.as_ref(), per_model);
-                        decoded.push((key, p.clone()));
-                        p
-                    }
-                };
-                own.placed(placement)
-            })
+            .cloned()
+            .zip(placements.iter().copied())
             .collect();
+        let parts = tessera_nav::placed_scene_points(&placed, per_model);
         let scene = ScenePoints::union(&parts);
         // The up axis most models guess from their own extent (ties: the first model's):
         // models side by side make the union wide, not tall.
